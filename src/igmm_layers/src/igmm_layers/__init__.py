@@ -1,0 +1,1 @@
+"""Object layers: incremental Gaussian mixtures of object detections per class and map region."""

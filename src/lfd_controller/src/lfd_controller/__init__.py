@@ -1,0 +1,1 @@
+"""Learning from demonstration: continuous inverse optimal control and a receding-horizon controller."""

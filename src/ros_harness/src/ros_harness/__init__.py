@@ -1,0 +1,27 @@
+"""Real ROS and database processes for tests, demos and benchmarks (no mocks)."""
+from ros_harness.errors import HarnessError, ProcessDied
+from ros_harness.processes import (
+    ManagedProcess,
+    MongoWireServer,
+    PouchDBServer,
+    RosCore,
+    RosLaunch,
+    free_port,
+    http_get_json,
+    master_graph,
+    wait_until,
+)
+
+__all__ = [
+    "HarnessError",
+    "ProcessDied",
+    "ManagedProcess",
+    "MongoWireServer",
+    "PouchDBServer",
+    "RosCore",
+    "RosLaunch",
+    "free_port",
+    "http_get_json",
+    "master_graph",
+    "wait_until",
+]

@@ -1,0 +1,454 @@
+"""Start and stop real ROS and database processes, and wait on conditions instead of sleeping.
+
+Everything here is started in its own process session and stopped by process id (never by name),
+with its output in a log file whose tail is quoted when something goes wrong.
+"""
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import tempfile
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+from typing import Callable, Dict, List, Mapping, Optional, Sequence
+from xml.sax.saxutils import quoteattr
+
+from ros_harness.errors import HarnessError, ProcessDied
+
+__all__ = [
+    "free_port",
+    "wait_until",
+    "ManagedProcess",
+    "RosCore",
+    "RosLaunch",
+    "PouchDBServer",
+    "MongoWireServer",
+    "master_graph",
+    "http_get_json",
+]
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def wait_until(condition: Callable[[], object], timeout: float, *, interval: float = 0.05,
+               what: str = "condition", check: Optional[Callable[[], None]] = None):
+    """Poll `condition` until it returns a true value, and return that value.
+
+    Args:
+        condition: called repeatedly; exceptions it raises count as "not yet".
+        timeout: seconds before giving up with TimeoutError naming `what`.
+        interval: seconds between polls (grows to at most 0.5 s).
+        check: called on every poll; raises to abort early (e.g. the process died).
+    """
+    deadline = time.monotonic() + timeout
+    last_error = None
+    while True:
+        if check is not None:
+            check()
+        try:
+            value = condition()
+            if value:
+                return value
+        except Exception as err:  # noqa: BLE001 - any failure means "not ready yet"
+            last_error = err
+        if time.monotonic() >= deadline:
+            detail = f" (last error: {last_error!r})" if last_error else ""
+            raise TimeoutError(f"timed out after {timeout:.1f} s waiting for {what}{detail}")
+        time.sleep(interval)
+        interval = min(interval * 1.5, 0.5)
+
+
+class ManagedProcess:
+    """A child process in its own session with its output in a log file."""
+
+    def __init__(self, argv: Sequence[str], *, name: str, log_path: Path,
+                 env: Optional[Mapping[str, str]] = None, cwd: Optional[Path] = None):
+        self.argv = [str(a) for a in argv]
+        self.name = name
+        self.log_path = Path(log_path)
+        self.env = dict(os.environ if env is None else env)
+        self.cwd = cwd
+        self.popen: Optional[subprocess.Popen] = None
+
+    def start(self) -> "ManagedProcess":
+        if self.alive:
+            raise HarnessError(f"{self.name} is already running (pid {self.pid})")
+        self.log_path.parent.mkdir(parents=True, exist_ok=True)
+        with open(self.log_path, "ab") as log:
+            self.popen = subprocess.Popen(self.argv, stdout=log, stderr=subprocess.STDOUT,
+                                          stdin=subprocess.DEVNULL, env=self.env, cwd=self.cwd,
+                                          start_new_session=True)
+        return self
+
+    @property
+    def pid(self) -> Optional[int]:
+        return self.popen.pid if self.popen else None
+
+    @property
+    def alive(self) -> bool:
+        return self.popen is not None and self.popen.poll() is None
+
+    def log_tail(self, lines: int = 40) -> str:
+        try:
+            text = self.log_path.read_text(errors="replace")
+        except OSError:
+            return ""
+        return "\n".join(text.splitlines()[-lines:])
+
+    def check_alive(self) -> None:
+        """Raise ProcessDied (with the log tail) when the process has exited."""
+        if self.popen is not None and self.popen.poll() is not None:
+            raise ProcessDied(f"{self.name} exited with status {self.popen.returncode}; "
+                              f"log {self.log_path}:\n{self.log_tail()}")
+
+    def send_signal(self, signum: int) -> None:
+        if self.alive:
+            os.kill(self.popen.pid, signum)
+
+    def stop(self, *, sig: int = signal.SIGINT, timeout: float = 20.0) -> Optional[int]:
+        """Send `sig`, wait up to `timeout`, then SIGKILL the whole process group.
+
+        Returns the exit status (None if the process was never started).
+        """
+        if self.popen is None:
+            return None
+        if self.popen.poll() is None:
+            try:
+                os.kill(self.popen.pid, sig)
+                self.popen.wait(timeout=timeout)
+            except (subprocess.TimeoutExpired, ProcessLookupError):
+                pass
+        self._kill_group()
+        return self.popen.wait()
+
+    def kill(self) -> None:
+        """SIGKILL the process and everything in its session, without any grace."""
+        if self.popen is not None:
+            self._kill_group()
+            self.popen.wait()
+
+    def _kill_group(self) -> None:
+        try:
+            os.killpg(self.popen.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+
+
+def master_graph(master_uri: str):
+    """A rosgraph Master proxy for queries about topics, services and nodes."""
+    import rosgraph
+
+    return rosgraph.Master("/ros_harness", master_uri=master_uri)
+
+
+class RosCore:
+    """A real roscore (rosmaster + rosout) on a free port."""
+
+    def __init__(self, *, port: Optional[int] = None, log_dir: Optional[Path] = None):
+        self.port = port or free_port()
+        self.log_dir = Path(log_dir or tempfile.mkdtemp(prefix="roscore_"))
+        self.uri = f"http://127.0.0.1:{self.port}"
+        self.process = ManagedProcess(["roscore", "-p", str(self.port)], name="roscore",
+                                      log_path=self.log_dir / "roscore.log", env=self.env())
+
+    def env(self, base: Optional[Mapping[str, str]] = None) -> Dict[str, str]:
+        """`base` (default: os.environ) pointed at this master, logs in this core's log dir."""
+        env = dict(os.environ if base is None else base)
+        env.update(ROS_MASTER_URI=self.uri, ROS_HOSTNAME="127.0.0.1",
+                   ROS_LOG_DIR=str(self.log_dir), ROS_HOME=str(self.log_dir))
+        env.pop("ROS_IP", None)
+        return env
+
+    def start(self, timeout: float = 30.0) -> "RosCore":
+        self.process.start()
+        wait_until(self._ready, timeout, what=f"roscore on port {self.port}",
+                   check=self.process.check_alive)
+        return self
+
+    def _ready(self) -> bool:
+        # The master answers and rosout has registered: nodes can start and log.
+        return _lookup_node(master_graph(self.uri), "/rosout")
+
+    def stop(self) -> None:
+        self.process.stop()
+
+    def __enter__(self) -> "RosCore":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+class RosLaunch:
+    """`roslaunch` of a package's launch file, a launch file path, or a single generated node.
+
+    Use `RosLaunch.node(...)` to run one node with private params and remaps, as rosrun would,
+    but with roslaunch's process handling.
+    """
+
+    def __init__(self, target: Sequence[str], *, master_uri: str, log_dir: Path,
+                 args: Optional[Mapping[str, object]] = None,
+                 env: Optional[Mapping[str, str]] = None, name: Optional[str] = None):
+        self.master_uri = master_uri
+        launch_args = [f"{key}:={_launch_value(value)}" for key, value in (args or {}).items()]
+        argv = ["roslaunch", "--wait", "--screen", *target, *launch_args]
+        self.name = name or " ".join(target)
+        log_name = "launch_" + "_".join(Path(t).stem for t in target) + f"_{time.time_ns()}.log"
+        self.process = ManagedProcess(argv, name=f"roslaunch {self.name}",
+                                      log_path=Path(log_dir) / log_name, env=env)
+
+    @classmethod
+    def node(cls, package: str, executable: str, *, master_uri: str, log_dir: Path,
+             name: Optional[str] = None, namespace: str = "/",
+             params: Optional[Mapping[str, object]] = None,
+             remap: Optional[Mapping[str, str]] = None, node_args: str = "",
+             env: Optional[Mapping[str, str]] = None) -> "RosLaunch":
+        """A launch of one node, written to a temporary launch file in `log_dir`."""
+        node_name = name or executable.split(".")[0]
+        lines = ["<launch>",
+                 f"  <node pkg={quoteattr(package)} type={quoteattr(executable)} "
+                 f"name={quoteattr(node_name)} ns={quoteattr(namespace)} "
+                 f"args={quoteattr(node_args)} required=\"false\" output=\"screen\">"]
+        for key, value in (params or {}).items():
+            lines.append(_param_xml(key, value))
+        for source, target in (remap or {}).items():
+            lines.append(f"    <remap from={quoteattr(source)} to={quoteattr(target)}/>")
+        lines += ["  </node>", "</launch>"]
+        path = Path(log_dir) / f"node_{node_name}_{time.time_ns()}.launch"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("\n".join(lines) + "\n")
+        return cls([str(path)], master_uri=master_uri, log_dir=log_dir, env=env, name=node_name)
+
+    def start(self) -> "RosLaunch":
+        self.process.start()
+        return self
+
+    def stop(self, timeout: float = 20.0) -> Optional[int]:
+        return self.process.stop(timeout=timeout)
+
+    def log_tail(self, lines: int = 60) -> str:
+        return self.process.log_tail(lines)
+
+    def _graph(self):
+        return master_graph(self.master_uri)
+
+    def wait_for_topics(self, topics: Sequence[str], timeout: float = 30.0) -> None:
+        """Wait until every topic in `topics` has a publisher."""
+        def published() -> bool:
+            names = {name for name, _ in self._graph().getPublishedTopics("/")}
+            return all(topic in names for topic in topics)
+        self._wait(published, timeout, f"topics {list(topics)}")
+
+    def wait_for_subscribers(self, topics: Sequence[str], timeout: float = 30.0) -> None:
+        """Wait until every topic in `topics` has a subscriber."""
+        def subscribed() -> bool:
+            subscribers = {name for name, nodes in self._graph().getSystemState()[1] if nodes}
+            return all(topic in subscribers for topic in topics)
+        self._wait(subscribed, timeout, f"subscribers of {list(topics)}")
+
+    def wait_for_services(self, services: Sequence[str], timeout: float = 30.0) -> None:
+        """Wait until every service in `services` is registered with the master."""
+        def registered() -> bool:
+            names = {name for name, _ in self._graph().getSystemState()[2]}
+            return all(service in names for service in services)
+        self._wait(registered, timeout, f"services {list(services)}")
+
+    def wait_for_nodes(self, nodes: Sequence[str], timeout: float = 30.0) -> None:
+        """Wait until every node in `nodes` is registered with the master."""
+        def registered() -> bool:
+            graph = self._graph()
+            return all(_lookup_node(graph, node) for node in nodes)
+        self._wait(registered, timeout, f"nodes {list(nodes)}")
+
+    def node_pid(self, node: str) -> int:
+        """The process id of a running node (asked of the node itself over XML-RPC)."""
+        import xmlrpc.client
+
+        uri = self._graph().lookupNode(node)
+        code, message, pid = xmlrpc.client.ServerProxy(uri).getPid("/ros_harness")
+        if code != 1:
+            raise HarnessError(f"node {node} did not give its pid: {message}")
+        return int(pid)
+
+    def wait_for_exit(self, timeout: float = 60.0) -> int:
+        """Wait for roslaunch to end by itself (all nodes `required` or finished)."""
+        wait_until(lambda: not self.process.alive, timeout, what=f"{self.name} to exit")
+        return self.process.popen.returncode
+
+    def _wait(self, condition: Callable[[], bool], timeout: float, what: str) -> None:
+        try:
+            wait_until(condition, timeout, what=f"{what} from {self.name}",
+                       check=self.process.check_alive)
+        except TimeoutError as err:
+            raise TimeoutError(f"{err}\nlog {self.process.log_path}:\n{self.log_tail()}") from None
+
+    def __enter__(self) -> "RosLaunch":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+def _lookup_node(graph, node: str) -> bool:
+    try:
+        return bool(graph.lookupNode(node))
+    except Exception:  # noqa: BLE001 - rosgraph raises MasterError for unknown nodes
+        return False
+
+
+def _launch_value(value: object) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return str(value)
+
+
+def _param_xml(key: str, value: object) -> str:
+    if isinstance(value, (list, dict)):
+        import yaml
+
+        text = yaml.safe_dump(value, default_flow_style=True).strip()
+        return f"    <rosparam param={quoteattr(key)} subst_value=\"false\">{_xml_text(text)}</rosparam>"
+    if isinstance(value, bool):
+        return f"    <param name={quoteattr(key)} type=\"bool\" value=\"{_launch_value(value)}\"/>"
+    if isinstance(value, int):
+        return f"    <param name={quoteattr(key)} type=\"int\" value=\"{value}\"/>"
+    if isinstance(value, float):
+        return f"    <param name={quoteattr(key)} type=\"double\" value=\"{value!r}\"/>"
+    return f"    <param name={quoteattr(key)} type=\"str\" value={quoteattr(str(value))}/>"
+
+
+def _xml_text(text: str) -> str:
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+def _which(env_var: str, program: str, hint: str) -> str:
+    path = os.environ.get(env_var) or shutil.which(program)
+    if not path or not Path(path).exists():
+        raise HarnessError(f"{program} not found (set {env_var} or {hint})")
+    return path
+
+
+class PouchDBServer:
+    """A real CouchDB-compatible HTTP server (pouchdb-server from npm) on a free port.
+
+    With `in_memory=False` (the default) data lives in LevelDB under `data_dir` and survives
+    `restart()`, so outage tests can stop and start the same server.
+    """
+
+    def __init__(self, data_dir: Path, *, port: Optional[int] = None, in_memory: bool = False):
+        self.data_dir = Path(data_dir)
+        self.port = port or free_port()
+        self.in_memory = in_memory
+        self.url = f"http://127.0.0.1:{self.port}"
+        self.process: Optional[ManagedProcess] = None
+
+    def _argv(self) -> List[str]:
+        binary = _which("POUCHDB_SERVER_BIN", "pouchdb-server", "run scripts/setup.sh")
+        # Without --unhandled-rejections=warn one bad request can kill the server (DATABASES.md).
+        argv = ["node", "--unhandled-rejections=warn", binary, "-o", "127.0.0.1",
+                "-p", str(self.port), "-d", str(self.data_dir),
+                "-c", str(self.data_dir / "config.json"), "-n"]
+        return argv + (["-m"] if self.in_memory else [])
+
+    def start(self, timeout: float = 30.0) -> "PouchDBServer":
+        self.data_dir.mkdir(parents=True, exist_ok=True)
+        self.process = ManagedProcess(self._argv(), name=f"pouchdb-server :{self.port}",
+                                      log_path=self.data_dir / "server.log",
+                                      cwd=self.data_dir).start()
+        wait_until(self._ready, timeout, what=f"pouchdb-server on port {self.port}",
+                   check=self.process.check_alive)
+        return self
+
+    def _ready(self) -> bool:
+        with urllib.request.urlopen(self.url + "/", timeout=2) as response:
+            return response.status == 200
+
+    def stop(self) -> None:
+        if self.process is not None:
+            self.process.stop(sig=signal.SIGTERM, timeout=10)
+            wait_until(lambda: not _port_open(self.port), 10, what=f"port {self.port} to close")
+
+    def restart(self) -> "PouchDBServer":
+        self.stop()
+        return self.start()
+
+    def database_url(self, name: str) -> str:
+        return f"{self.url}/{name}"
+
+    def __enter__(self) -> "PouchDBServer":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+class MongoWireServer:
+    """A real MongoDB wire-protocol server (nx-27017 from PyPI, on SQLite) on a free port.
+
+    One SQLite file per logical database under `data_dir` (as mongod keeps databases apart);
+    its PID file and log live there too, so several servers can run at once. A test and demo
+    stand-in for mongod: code under test may only use what real MongoDB offers.
+    """
+
+    def __init__(self, data_dir: Path, *, port: Optional[int] = None):
+        self.data_dir = Path(data_dir)
+        self.port = port or free_port()
+        self.url = f"mongodb://127.0.0.1:{self.port}"
+        self.process: Optional[ManagedProcess] = None
+
+    def start(self, timeout: float = 30.0) -> "MongoWireServer":
+        self.data_dir.mkdir(parents=True, exist_ok=True)
+        binary = _which("NX27017_BIN", "nx-27017", "run scripts/setup.sh")
+        argv = [binary, "--data-dir", str(self.data_dir), "--host", "127.0.0.1",
+                "-p", str(self.port), "--pid-file", str(self.data_dir / "nx-27017.pid"),
+                "--log-file", str(self.data_dir / "nx-27017.log")]
+        self.process = ManagedProcess(argv, name=f"nx-27017 :{self.port}",
+                                      log_path=self.data_dir / "server.log").start()
+        wait_until(lambda: _port_open(self.port), timeout, what=f"nx-27017 on port {self.port}",
+                   check=self.process.check_alive)
+        return self
+
+    def stop(self) -> None:
+        if self.process is not None:
+            self.process.stop(sig=signal.SIGTERM, timeout=10)
+
+    def restart(self) -> "MongoWireServer":
+        self.stop()
+        wait_until(lambda: not _port_open(self.port), 10, what=f"port {self.port} to close")
+        return self.start()
+
+    def database_url(self, name: str) -> str:
+        return f"{self.url}/{name}"
+
+    def __enter__(self) -> "MongoWireServer":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+def _port_open(port: int) -> bool:
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=0.5):
+            return True
+    except OSError:
+        return False
+
+
+def http_get_json(url: str, timeout: float = 5.0):
+    """GET a JSON document (used by tests that look at a CouchDB server directly)."""
+    import json
+
+    try:
+        with urllib.request.urlopen(url, timeout=timeout) as response:
+            return json.loads(response.read().decode())
+    except urllib.error.HTTPError as err:
+        raise HarnessError(f"GET {url} answered {err.code}: {err.read()[:200]!r}") from err

@@ -1,0 +1,1 @@
+"""People traffic: sparse variational GP regression of people counts over space and time of day."""
