@@ -120,6 +120,9 @@ step_catkin() {
 main() {
   local start
   start=$(date +%s)
+  # One set-up at a time (parallel `make test` runs would otherwise race in catkin_make and pip).
+  exec 9>"$STAMPS/lock"
+  flock 9
   step_apt
   step_venv
   step_pouchdb
