@@ -6,6 +6,7 @@ cd "$(dirname "${BASH_SOURCE[0]}")/.."
 mkdir -p artifacts/bench
 failed=()
 for bench in bench/*.py; do
+  grep -q '__main__' "$bench" || continue  # shared helper modules are not benchmarks
   echo "=== $bench ==="
   # shellcheck disable=SC2086
   python "$bench" ${BENCH_ARGS:-} || failed+=("$bench")

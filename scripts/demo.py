@@ -39,6 +39,11 @@ class Demo:
         self.launches.append(launch)
         return launch.start()
 
+    def stop(self, launch: RosLaunch) -> None:
+        """Stop one launch of this chapter (the others keep running)."""
+        launch.stop()
+        self.launches.remove(launch)
+
     def stop_all(self) -> None:
         for launch in reversed(self.launches):
             launch.stop()

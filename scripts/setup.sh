@@ -18,7 +18,8 @@ APT_PACKAGES=(
   ros-core-python-dev catkin ros-message-generation rosbash
   python3-rospy python3-rosbag python3-roslaunch python3-rostopic python3-rosservice python3-rostest
   python3-std-msgs python3-geometry-msgs python3-sensor-msgs python3-nav-msgs
-  python3-visualization-msgs python3-diagnostic-msgs python3-tf2-ros python3-tf2-geometry-msgs
+  python3-visualization-msgs python3-diagnostic-msgs python3-std-srvs python3-tf2-ros
+  python3-tf2-geometry-msgs
   # build tools catkin_make needs
   cmake g++ make
   # the virtual environment

@@ -1,1 +1,31 @@
-"""Object layers: incremental Gaussian mixtures of object detections per class and map region."""
+"""Object layers: incremental Gaussian mixtures of object detections per class and map region.
+
+Pure-Python core (no rospy): `IncrementalGMM` (igmm.py), `ClassHierarchy`, `LayerSet`/`Layer`
+(layers.py), queries (queries.py), scores (metrics.py). The ROS node is in ros_*.py and
+nodes/igmm_layers.
+"""
+from igmm_layers.errors import (
+    IGMMError,
+    InvalidInputError,
+    NotFittedError,
+    PersistenceError,
+    UnknownNameError,
+)
+from igmm_layers.hierarchy import ClassHierarchy
+from igmm_layers.igmm import IncrementalGMM
+from igmm_layers.layers import LAYER_KINDS, ClusterTable, Layer, LayerParams, LayerSet
+
+__all__ = [
+    "IncrementalGMM",
+    "ClassHierarchy",
+    "LayerSet",
+    "Layer",
+    "LayerParams",
+    "ClusterTable",
+    "LAYER_KINDS",
+    "IGMMError",
+    "InvalidInputError",
+    "NotFittedError",
+    "PersistenceError",
+    "UnknownNameError",
+]

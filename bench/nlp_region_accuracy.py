@@ -1,0 +1,198 @@
+#!/usr/bin/env python3
+"""Accuracy of the region recommender on bench/data/region_eval.yaml, and model load times.
+
+Variants (each: top-1 / top-3 on the dev half, the held-out test half and all queries):
+- string baseline: label names ranked by spelling similarity alone;
+- WordNet lexical: WordNet-expanded labels, exact word matches only (no vectors);
+- the sentence backend (all-MiniLM-L6-v2, the product default), in this process:
+  names/phrase (cosine of the phrase's and the label name's vectors), expanded/phrase (label
+  name + its WordNet words as one text, numbers matched exactly: the product default), the same
+  with numbers as text only, and the word-level method of the
+  word2vec backend run on the sentence model's word vectors (expanded/align+spelling+hubness);
+- word2vec on Brown, on WordNet glosses, on Brown + glosses (the fallback), each with
+  names/mean (the original approach: cosine of mean vectors of the label-name words),
+  names/align (each query word's best label word), names/align+spelling,
+  expanded/align+spelling (labels expanded with WordNet synonyms, related words, definitions),
+  ... +query expansion (query words also matched through their WordNet words),
+  ... +hubness (each label's mean match with the other labels' words subtracted: the word2vec
+  default), and that with raw vectors (no common-direction removal).
+Also: word2vec training time, and each backend's load time in a fresh process (imports included).
+
+    python bench/nlp_region_accuracy.py [--quick] [--brown PATH] [--retrain]
+
+Writes artifacts/bench/nlp_region_accuracy.json and nlp_region_accuracy.png.
+"""
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from nlp_common import BROWN_ZIP, OUT_DIR, evaluate, fresh_process_load_seconds, load_eval, write_json
+
+from igmm_layers.corpora import WordNet
+from igmm_layers.embeddings import WordEmbeddings
+from igmm_layers.embeddings_sentence import load_sentence_model
+from igmm_layers.embeddings_training import Word2VecParams, load_embeddings
+from igmm_layers.recommender import Region, RegionRecommender
+from igmm_layers.recommender_phrase import PhraseRegionRecommender
+from igmm_layers.text_similarity import content_words, string_baseline_score, tokenize
+
+PRODUCT = "sentence expanded/phrase"
+FALLBACK = "brown+wordnet expanded/align+spelling+hubness"
+
+
+def recommender_ranker(recommender: RegionRecommender):
+    def rank(phrase, labels):
+        recommender.set_regions([Region(name, 0.0, 0.0) for name in labels])
+        return [r.region.name for r in recommender.recommend(phrase, top_k=0).results]
+    return rank
+
+
+def string_ranker(phrase, labels):
+    words = content_words(phrase)
+    return sorted(labels, key=lambda name: (-string_baseline_score(words, tokenize(name)), name))
+
+
+def embedding_variants(embeddings, wordnet, raw):
+    embed = embeddings.embed_words
+    return {
+        "names/mean": RegionRecommender(embed, use_spelling=False, method="mean"),
+        "names/align": RegionRecommender(embed, use_spelling=False),
+        "names/align+spelling": RegionRecommender(embed),
+        "expanded/align+spelling": RegionRecommender(embed, wordnet=wordnet),
+        "expanded/align+spelling+query expansion": RegionRecommender(embed, wordnet=wordnet,
+                                                                     expand_query=True),
+        "expanded/align+spelling+hubness": RegionRecommender(embed, wordnet=wordnet, hubness=True),
+        "expanded/align+spelling+hubness, raw vectors": RegionRecommender(
+            raw.embed_words, wordnet=wordnet, hubness=True),
+    }
+
+
+def sentence_variants(wordnet):
+    """The sentence model's variants (the model loaded once, in this process)."""
+    start = time.monotonic()
+    sentence = load_sentence_model()
+    load_seconds = time.monotonic() - start
+    variants = {
+        "sentence names/phrase": PhraseRegionRecommender(sentence.embed_phrases),
+        "sentence expanded/phrase, numbers as text only": PhraseRegionRecommender(
+            sentence.embed_phrases, wordnet=wordnet, number_weight=0.0),
+        PRODUCT: PhraseRegionRecommender(sentence.embed_phrases, wordnet=wordnet),
+        "sentence expanded/align+spelling+hubness (word level)": RegionRecommender(
+            sentence.embed_words, wordnet=wordnet, hubness=True),
+    }
+    return sentence, load_seconds, variants
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true",
+                        help="word2vec on WordNet glosses only (no Brown variants)")
+    parser.add_argument("--brown", default=str(BROWN_ZIP), help="Brown corpus (zip or folder)")
+    parser.add_argument("--retrain", action="store_true",
+                        help="train into a fresh temporary cache (measures training time)")
+    args = parser.parse_args()
+    buildings = load_eval()
+    n_queries = sum(len(b["queries"]) for b in buildings.values())
+    print(f"evaluation set: {n_queries} queries over {len(buildings)} buildings "
+          f"({sum(len(b['labels']) for b in buildings.values())} labels)")
+    wordnet = WordNet()
+    results, models = {}, {}
+    results["string baseline"] = evaluate(string_ranker, buildings)
+    results["WordNet lexical (no vectors)"] = evaluate(
+        recommender_ranker(RegionRecommender(None, wordnet=wordnet)), buildings)
+    sentence, in_process_load, variants = sentence_variants(wordnet)
+    for variant, recommender in variants.items():
+        results[variant] = evaluate(recommender_ranker(recommender), buildings)
+    models["sentence"] = {"description": sentence.description, "dimension": sentence.dimension,
+                          "in_process_load_seconds": in_process_load,
+                          "fresh_process": fresh_process_load_seconds(backend="sentence")}
+    sources = ["wordnet"] if args.quick else ["brown", "wordnet", "brown+wordnet"]
+    cache_dir = tempfile.mkdtemp(prefix="nlp_bench_cache_") if args.retrain else None
+    params = Word2VecParams()
+    for source in sources:
+        embeddings, info = load_embeddings(source, brown_path=args.brown, params=params,
+                                           cache_dir=cache_dir, progress=True)
+        meta = json.loads((Path(info["path"]) / "meta.json").read_text())
+        models[source] = {"words": len(embeddings), "dimension": embeddings.dimension,
+                          "tokens": meta["tokens"], "train_seconds": meta["train_seconds"],
+                          "trained_now": not info["cache_hit"], "first_load_seconds": info["seconds"],
+                          "fresh_process": fresh_process_load_seconds(
+                              backend="word2vec", source=source, brown_path=args.brown,
+                              cache_dir=cache_dir or "")}
+        raw = WordEmbeddings(embeddings.kv, counts=embeddings.probabilities,
+                             base_forms=embeddings.base_forms, remove_components=-1)
+        for variant, recommender in embedding_variants(embeddings, wordnet, raw).items():
+            results[f"{source} {variant}"] = evaluate(recommender_ranker(recommender), buildings)
+    report(results, models)
+    path = write_json("nlp_region_accuracy", {
+        "queries": n_queries, "params": vars(params), "models": models,
+        "results": results, "product_variant": PRODUCT, "fallback_variant": FALLBACK,
+        "quick": args.quick, "load_average": os.getloadavg()})
+    plot(results, OUT_DIR / "nlp_region_accuracy.png")
+    print(f"\nwrote {path} and {OUT_DIR / 'nlp_region_accuracy.png'}")
+    return 0
+
+
+def report(results, models) -> None:
+    print(f"\n{'variant':56s} {'dev top1/top3':>14s} {'test top1/top3':>15s} {'all top1/top3':>14s}")
+    for name, result in results.items():
+        s = result["summary"]
+        cells = [f"{s[k]['top1']:5.0%} /{s[k]['top3']:5.0%}" for k in ("dev", "test", "all")]
+        mark = {PRODUCT: "  <- product default", FALLBACK: "  <- word2vec default (fallback)"}
+        print(f"{name:56s} {cells[0]:>14s} {cells[1]:>15s} {cells[2]:>14s}{mark.get(name, '')}")
+    print(f"\nmodels (machine load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores):")
+    for source, model in models.items():
+        fresh = model["fresh_process"]
+        if source == "sentence":
+            print(f"  sentence       {model['description']}; load in this process "
+                  f"{model['in_process_load_seconds']:.1f} s")
+        else:
+            print(f"  {source:14s} word2vec (skip-gram) {model['words']:6d} words x "
+                  f"{model['dimension']}, {model['tokens'] / 1e6:.2f} M tokens, trained in "
+                  f"{model['train_seconds']:.1f} s")
+        print(f"  {'':14s} fresh process, imports included, to the first vector: "
+              f"{fresh['seconds']:.1f} s (loader {fresh['load_seconds']:.1f} s)")
+    for name in (PRODUCT, FALLBACK):
+        if name in results:
+            print(f"\n{name} misses (all queries):")
+            for row in results[name]["queries"]:
+                if not row["top1_ok"]:
+                    print(f"  [{row['split']}] {row['phrase']!r}: expected {row['expected']}, "
+                          f"got {row['top3']}")
+
+
+def plot(results, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(results)
+    top1 = [results[n]["summary"]["all"]["top1"] for n in names]
+    top3 = [results[n]["summary"]["all"]["top3"] for n in names]
+    fig, ax = plt.subplots(figsize=(10, 0.32 * len(names) + 1.5))
+    ys = range(len(names))
+    ax.barh([y + 0.2 for y in ys], top3, height=0.4, label="top-3", color="#9ecae1")
+    ax.barh([y - 0.2 for y in ys], top1, height=0.4, label="top-1", color="#3182bd")
+    ax.axvline(0.8, color="red", linestyle="--", linewidth=1, label="target top-1 80%")
+    ax.set_yticks(list(ys))
+    ax.set_yticklabels(names, fontsize=7)
+    ax.invert_yaxis()
+    ax.set_xlim(0, 1)
+    ax.set_xlabel("accuracy over all queries")
+    ax.legend(loc="lower right", fontsize=7)
+    ax.set_title("Region recommender accuracy by variant")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    start = time.monotonic()
+    status = main()
+    print(f"({time.monotonic() - start:.0f} s)")
+    sys.exit(status)

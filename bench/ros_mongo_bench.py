@@ -1,0 +1,258 @@
+#!/usr/bin/env python3
+"""ros_mongo benchmark, in one run on this machine (`python bench/ros_mongo_bench.py [--quick]`):
+
+1. record: ros_mongo_server against `rosbag record`, both subscribed to the same publishers at the
+   same time (1 kHz Odometry, 30 Hz 640x480 rgb8 Image, 40 Hz 1081-beam LaserScan): messages stored
+   per second, drops (published - stored), ratio to rosbag; per database backend.
+2. import: that bag into each database (ros_mongo_bag's import) against the same server's raw
+   bulk-insert rate for the same payloads (msgs/s, MB/s, ratio; target >= 0.5).
+3. replay: ros_mongo_retriever against `rosbag play` of the same data: p50/p99 of the inter-message
+   gap error |received gap - recorded gap| per message pair (target: no worse than rosbag play).
+
+Figures are printed, written to artifacts/bench/ros_mongo.json, plots to artifacts/bench/ros_mongo_*.png.
+"""
+import argparse
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parent.parent
+PUBLISHER = ROOT / "src" / "ros_mongo" / "scripts" / "ros_mongo_bench_publisher"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from ros_mongo_bench_lib import (  # noqa: E402 - after the path set-up
+    BACKENDS,
+    TOPICS,
+    Arrivals,
+    RecorderWatch,
+    bag_counts,
+    gap_errors,
+    plot_results,
+    raw_bulk_rate,
+    recorded_times,
+    start_servers,
+    subscribers_ready,
+)
+
+from ros_harness import ManagedProcess, RosCore, RosLaunch, wait_until  # noqa: E402
+from ros_mongo import open_store  # noqa: E402
+from ros_mongo.bagio import import_bag  # noqa: E402
+
+
+def say(text=""):
+    print(text, flush=True)
+
+
+def bench_record(core, url, work, duration, backend):
+    """The recorder and rosbag record on the same publishers at the same time."""
+    bag = work / f"record_{backend}.bag"
+    logs = work / "logs"
+    recorder = RosLaunch.node("ros_mongo", "ros_mongo_server", master_uri=core.uri, log_dir=logs,
+                              env=core.env(), params={
+                                  "db_url": url, "topics": list(TOPICS), "session_id": f"bench_{backend}",
+                                  "spool_path": str(work / f"{backend}.spool"), "diagnostics_period": 0.5,
+                                  "shutdown_timeout": 120.0}).start()
+    rosbag = ManagedProcess(["rosbag", "record", "-O", str(bag), *TOPICS], name="rosbag record",
+                            log_path=logs / f"rosbag_record_{backend}.log", env=core.env()).start()
+    watch = RecorderWatch()
+    wait_until(lambda: subscribers_ready(core.uri, TOPICS, 2), 60, what="recorder and rosbag subscribed")
+    publisher = subprocess.run([sys.executable, str(PUBLISHER),
+                                "--duration", str(duration), "--wait-subscribers", "2"],
+                               capture_output=True, text=True, env=core.env(), timeout=duration + 120)
+    if publisher.returncode != 0:
+        raise RuntimeError(f"publisher failed: {publisher.stderr[-2000:]}")
+    published = json.loads(publisher.stdout.strip().splitlines()[-1])
+    at_end = dict(watch.values)
+    ended = time.monotonic()
+    total = sum(published["published"].values())
+    wait_until(lambda: watch.count("stored") + watch.count("dropped") >= watch.count("received") > 0
+               and watch.count("spool_pending") == 0 and watch.count("queued") == 0
+               and watch.count("received") >= total * 0.5, 600, what="recorder caught up")
+    drain = time.monotonic() - ended
+    recorder.stop(timeout=150)
+    os.killpg(rosbag.pid, signal.SIGINT)  # the wrapper and its `record` child: the bag gets its index
+    wait_until(lambda: bag.exists() and not Path(str(bag) + ".active").exists(), 120, interval=0.2,
+               what="rosbag record to close the bag")
+    rosbag.stop(timeout=10)
+    watch.close()
+    with open_store(url) as store:
+        stored = {t: store.count_messages(topic=t, session_id=f"bench_{backend}") for t in TOPICS}
+    in_bag = bag_counts(bag)
+    seconds = published["seconds"]
+    result = {"published": published["published"], "seconds": seconds,
+              "recorder": _rates(stored, published["published"], seconds),
+              "rosbag": _rates(in_bag, published["published"], seconds),
+              "recorder_stored_while_publishing": watch.count_at(at_end, "stored"),
+              "recorder_drain_seconds_after_publishing": drain, "bag": str(bag),
+              "timeline": watch.timeline}
+    rosbag_rate = max(result["rosbag"]["stored_per_s"], 1e-9)
+    result["ratio_stored_per_s"] = result["recorder"]["stored_per_s"] / rosbag_rate
+    # what reached the database while publishing, and the rate until everything was stored
+    result["recorder_realtime_per_s"] = result["recorder_stored_while_publishing"] / seconds
+    result["recorder_sustained_per_s"] = result["recorder"]["stored_total"] / (seconds + drain)
+    result["ratio_sustained"] = result["recorder_sustained_per_s"] / rosbag_rate
+    result["megabytes"] = bag.stat().st_size / 1e6
+    result["recorder_spooled"] = watch.count_at(watch.values, "spooled")
+    return result
+
+
+def _rates(stored, published, seconds):
+    return {"stored": stored, "stored_total": sum(stored.values()),
+            "stored_per_s": sum(stored.values()) / seconds,
+            "drops": {t: published[t] - stored.get(t, 0) for t in published},
+            "drops_total": sum(published[t] - stored.get(t, 0) for t in published)}
+
+
+def bench_import(bag, urls):
+    results = {}
+    for backend, url in urls.items():
+        with open_store(url + "_import") as store:
+            imported = import_bag(bag, store, session_id="import", progress=True)
+        raw = raw_bulk_rate(bag, url + "_raw")
+        results[backend] = {"import_msgs_per_s": imported.rate,
+                            "import_mb_per_s": imported.megabytes_per_second,
+                            "messages": imported.messages, "megabytes": imported.bytes / 1e6,
+                            "raw_msgs_per_s": raw["msgs_per_s"], "raw_mb_per_s": raw["mb_per_s"],
+                            "ratio_msgs": imported.rate / raw["msgs_per_s"],
+                            "ratio_mb": imported.megabytes_per_second / raw["mb_per_s"]}
+    return results
+
+
+def bench_replay(core, bag, url, work, extra, repeats):
+    """The same data through rosbag play and through ros_mongo_retriever, alternately `repeats`
+    times; gap errors per topic pooled over the runs, and the median of the runs' p99."""
+    recorded = recorded_times(bag)
+    runs = {"rosbag_play": [], "ros_mongo_retriever": []}
+    for run in range(repeats):
+        say(f"  replay run {run + 1}/{repeats}")
+        runs["rosbag_play"].append(_play_rosbag(core, bag, work))
+        runs["ros_mongo_retriever"].append(_play_retriever(core, url, work, extra, recorded))
+    results = {}
+    for who, arrivals in runs.items():
+        results[who] = gap_errors(arrivals, recorded)
+        results[who]["p99_ms_per_run"] = [gap_errors(a, recorded)["all"]["p99_ms"] for a in arrivals]
+    return results
+
+
+def _play_rosbag(core, bag, work):
+    arrivals = Arrivals({f"/play{t}": t for t in TOPICS})
+    player = ManagedProcess(["rosbag", "play", "--quiet", "--wait-for-subscribers", "--prefix", "/play",
+                             str(bag)], name="rosbag play", log_path=work / "logs" / "rosbag_play.log",
+                            env=core.env()).start()
+    wait_until(lambda: not player.alive, 600, interval=0.2, what="rosbag play to finish")
+    arrivals.close()
+    return arrivals.times
+
+
+def _play_retriever(core, url, work, extra, recorded):
+    arrivals = Arrivals({f"{t}_mongo": t for t in TOPICS})
+    params = {"db_url": url + "_import", "query": "session_id import", "start_delay": 2.0, "autostart": True}
+    retriever = RosLaunch.node("ros_mongo", "ros_mongo_retriever", master_uri=core.uri, log_dir=work / "logs",
+                               env=core.env(), params={**params, **extra}).start()
+    expected = sum(len(v) for v in recorded.values())
+    wait_until(lambda: arrivals.total() >= expected, 600, interval=0.2, what="retriever replay",
+               check=retriever.process.check_alive)
+    retriever.stop()
+    arrivals.close()
+    return arrivals.times
+
+
+def report(results):
+    say("\n== ros_mongo benchmark ==")
+    for backend, rec in results.get("record", {}).items():
+        say(f"record ({backend}, {rec['seconds']:.1f} s; published {rec['published']}):")
+        for who in ("recorder", "rosbag"):
+            r = rec[who]
+            say(f"  {who:9s} stored {r['stored_total']:6d} msgs = {r['stored_per_s']:7.1f} msgs/s, "
+                f"drops {r['drops_total']} {r['drops']}")
+        say(f"  ratio recorder/rosbag (messages stored per s of publishing): {rec['ratio_stored_per_s']:.3f}")
+        say(f"  recorder in time: {rec['recorder_stored_while_publishing']} stored when publishing ended "
+            f"({rec['recorder_realtime_per_s']:.0f} msgs/s), all stored "
+            f"{rec['recorder_drain_seconds_after_publishing']:.1f} s later: sustained "
+            f"{rec['recorder_sustained_per_s']:.0f} msgs/s = {rec['ratio_sustained']:.2f} x rosbag "
+            f"({rec['megabytes']:.0f} MB published; {rec['recorder_spooled']} went through the spool)")
+    for backend, imp in results.get("import", {}).items():
+        say(f"import ({backend}, {imp['messages']} msgs, {imp['megabytes']:.0f} MB): "
+            f"{imp['import_msgs_per_s']:.0f} msgs/s, {imp['import_mb_per_s']:.1f} MB/s; raw bulk insert "
+            f"{imp['raw_msgs_per_s']:.0f} msgs/s, {imp['raw_mb_per_s']:.1f} MB/s; ratio "
+            f"{imp['ratio_msgs']:.2f} (msgs) {imp['ratio_mb']:.2f} (MB)")
+    for who, rep in results.get("replay", {}).items():
+        total = rep["all"]
+        per_run = ", ".join(f"{v:.2f}" for v in rep["p99_ms_per_run"])
+        say(f"replay {who:20s} gap error p50 {total['p50_ms']:.3f} ms, p99 {total['p99_ms']:.3f} ms "
+            f"(pooled over {len(rep['p99_ms_per_run'])} runs; p99 per run {per_run} ms), "
+            f"received {total['received']}/{total['expected']}")
+        for topic, value in rep.items():
+            if topic.startswith("/"):
+                say(f"    {topic:24s} p50 {value['p50_ms']:.3f} ms, p99 {value['p99_ms']:.3f} ms, "
+                    f"received {value['received']}/{value['expected']}")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="a smoke run: 4 s of publishing, CouchDB only")
+    parser.add_argument("--duration", type=float, help="seconds of publishing (default 20, quick 4)")
+    parser.add_argument("--backends", nargs="*", choices=BACKENDS, help="default: both (quick: couchdb)")
+    parser.add_argument("--output", type=Path, default=ROOT / "artifacts" / "bench")
+    parser.add_argument("--keep", action="store_true", help="keep the work folder (bags, databases)")
+    parser.add_argument("--bag", type=Path, help="skip recording: import and replay this bag (recorded by "
+                        "an earlier run with --keep)")
+    parser.add_argument("--replay-repeats", type=int, default=3,
+                        help="replays of each kind, alternating (default 3)")
+    parser.add_argument("--retriever-param", nargs="*", default=[], metavar="KEY=YAML",
+                        help="extra ros_mongo_retriever parameters for the replay stage")
+    args = parser.parse_args(argv)
+    duration = args.duration or (4.0 if args.quick else 20.0)
+    backends = args.backends or (["couchdb"] if args.quick else list(BACKENDS))
+    args.output.mkdir(parents=True, exist_ok=True)
+    work = args.output / "ros_mongo_work"
+    if args.bag is not None:
+        args.bag = args.bag.resolve()
+        work = args.output / "ros_mongo_work_replay"
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir(parents=True)
+    core = RosCore(log_dir=work / "logs").start()
+    os.environ.update(core.env())
+    servers = start_servers(work, backends)
+    import rospy
+
+    rospy.init_node("ros_mongo_bench", anonymous=True, disable_signals=True)
+    load = os.getloadavg()
+    results = {"duration": duration, "load_before": load, "cpus": os.cpu_count(), "record": {}}
+    try:
+        for backend in backends if args.bag is None else []:
+            say(f"record: {backend}, {duration:.0f} s of publishing ...")
+            results["record"][backend] = bench_record(core, servers[backend].database_url("bench"), work,
+                                                      duration, backend)
+        bag = args.bag or Path(results["record"][backends[0]]["bag"])
+        say("import ...")
+        results["import"] = bench_import(bag, {b: servers[b].database_url("bench") for b in backends})
+        say("replay ...")
+        extra = {k: yaml.safe_load(v) for k, v in (p.split("=", 1) for p in args.retriever_param)}
+        results["replay"] = bench_replay(core, bag, servers[backends[0]].database_url("bench"), work, extra,
+                                         args.replay_repeats)
+    finally:
+        rospy.signal_shutdown("bench finished")
+        for server in servers.values():
+            server.stop()
+        core.stop()
+        results["load_after"] = os.getloadavg()
+    report(results)
+    (args.output / "ros_mongo.json").write_text(json.dumps(results, indent=1, default=str))
+    plot_results(results, args.output)
+    say(f"\nload average before {load[0]:.1f}, after {results['load_after'][0]:.1f} ({os.cpu_count()} CPUs); "
+        f"figures in {args.output / 'ros_mongo.json'}")
+    if not args.keep:
+        shutil.rmtree(work, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,105 @@
+"""The embedding backends a server can serve, chosen by name, with a fallback that says so.
+
+- "sentence" (default): a pretrained sentence model (embeddings_sentence; all-MiniLM-L6-v2 unless
+  `model_path` names another local sentence-transformers folder): whole-phrase vectors.
+- "word2vec": word vectors (embeddings.WordEmbeddings): trained on Brown + WordNet glosses and
+  cached (`source`), or any pretrained KeyedVectors file (`model_path`, or `source` "pretrained"
+  with `pretrained_path`).
+
+When the sentence model cannot be loaded (PyTorch or sentence-transformers missing, as on a
+Python 3.8 robot; a folder without a model), `load_backend` serves word2vec instead (unless
+`fallback` is off) and returns why in `LoadedBackend.note`, which the server logs and puts in
+every response.
+"""
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Dict, Optional, Union
+
+from igmm_layers.corpora import DEFAULT_WORDNET_DIR
+from igmm_layers.embeddings import WordEmbeddings
+from igmm_layers.embeddings_errors import ModelError
+from igmm_layers.embeddings_sentence import SentenceEmbeddings, load_sentence_model
+from igmm_layers.embeddings_training import Word2VecParams, load_embeddings
+
+__all__ = ["BACKENDS", "BackendConfig", "LoadedBackend", "load_backend"]
+
+LOG = logging.getLogger(__name__)
+BACKENDS = ("sentence", "word2vec")
+Embeddings = Union[SentenceEmbeddings, WordEmbeddings]
+
+
+@dataclass(frozen=True)
+class BackendConfig:
+    """What to serve (the embedding server's parameters; see config/embeddings.yaml).
+
+    backend: "sentence" or "word2vec".
+    model_path: sentence: a local sentence-transformers folder ("" = all-MiniLM-L6-v2);
+        word2vec: a KeyedVectors file ("" = `source`).
+    fallback: serve word2vec (`source`, `pretrained_path`) when the sentence model cannot be loaded.
+    threads, cache_size, batch_size: the sentence model's torch threads, cached phrases, batch.
+    source, pretrained_path, brown_path, wordnet_dir, cache_dir, limit, word2vec,
+    remove_components: the word2vec model (embeddings_training.load_embeddings).
+    """
+
+    backend: str = "sentence"
+    model_path: str = ""
+    fallback: bool = True
+    threads: int = 1
+    cache_size: int = 10_000
+    batch_size: int = 64
+    source: str = "auto"
+    pretrained_path: str = ""
+    brown_path: str = ""
+    wordnet_dir: str = DEFAULT_WORDNET_DIR
+    cache_dir: str = ""
+    limit: int = 0
+    remove_components: int = 1
+    word2vec: Word2VecParams = field(default_factory=Word2VecParams)
+
+
+@dataclass
+class LoadedBackend:
+    """A loaded model: `backend` is the one actually served; `note` is "" or the fallback reason."""
+
+    embeddings: Embeddings
+    backend: str
+    note: str
+    load_seconds: float
+    info: Dict = field(default_factory=dict)
+
+
+def load_backend(config: BackendConfig = BackendConfig(), *, progress: bool = False) -> LoadedBackend:
+    """The model to serve; ModelError when it (and its allowed fallback) cannot be loaded."""
+    if config.backend not in BACKENDS:
+        raise ModelError(f"unknown embedding backend {config.backend!r}; use one of {BACKENDS}")
+    start = time.monotonic()
+    note = ""
+    if config.backend == "sentence":
+        try:
+            embeddings = load_sentence_model(config.model_path, threads=config.threads,
+                                             cache_size=config.cache_size,
+                                             batch_size=config.batch_size)
+            return LoadedBackend(embeddings, "sentence", "", time.monotonic() - start)
+        except ModelError as err:
+            if not config.fallback:
+                raise ModelError(f"sentence model unavailable (fallback disabled): {err}") from err
+            note = f"fallback to word2vec: sentence model unavailable: {err}"
+            LOG.warning("%s; loading word2vec (source %r)", note, _word2vec_source(config, False))
+    embeddings, info = _load_word2vec(config, use_model_path=config.backend == "word2vec",
+                                      progress=progress)
+    return LoadedBackend(embeddings, "word2vec", note, time.monotonic() - start, info)
+
+
+def _word2vec_source(config: BackendConfig, use_model_path: bool) -> str:
+    return "pretrained" if use_model_path and config.model_path else config.source
+
+
+def _load_word2vec(config: BackendConfig, *, use_model_path: bool, progress: bool):
+    source = _word2vec_source(config, use_model_path)
+    path = config.model_path if use_model_path and config.model_path else config.pretrained_path
+    cache_dir: Optional[str] = config.cache_dir or None
+    return load_embeddings(source, pretrained_path=path, brown_path=config.brown_path,
+                           wordnet_dir=config.wordnet_dir, params=config.word2vec,
+                           cache_dir=cache_dir, progress=progress, limit=config.limit or None,
+                           options={"remove_components": config.remove_components})

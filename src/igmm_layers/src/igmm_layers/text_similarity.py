@@ -1,0 +1,118 @@
+"""Words of phrases and label names, and similarity by spelling (no model needed).
+
+- `tokenize("Towne_321's lab")` -> ["towne", "321", "lab"]: lower case, letters and digits split
+  ("bio_lab", "towne321", "x-ray" all split), possessive 's dropped.
+- `content_words` drops English function words (the usual stop-word list).
+- `spelling_similarity(a, b)`: Dice coefficient of padded character trigrams in [0, 1]; numbers
+  match only exactly (room 321 is not room 312).
+- `SpellingIndex`: the vocabulary word spelled most like a given word (an inverted trigram index),
+  the last fallback for a word without a vector.
+"""
+import re
+from collections import defaultdict
+from typing import Dict, FrozenSet, Iterable, List, Optional, Sequence, Tuple
+
+__all__ = ["STOPWORDS", "tokenize", "content_words", "is_number", "trigrams",
+           "spelling_similarity", "SpellingIndex", "string_baseline_score"]
+
+# The common English stop-word list (function words only; no domain words).
+STOPWORDS: FrozenSet[str] = frozenset("""
+i me my myself we our ours ourselves you your yours yourself yourselves he him his himself she her
+hers herself it its itself they them their theirs themselves what which who whom this that these
+those am is are was were be been being have has had having do does did doing a an the and but if
+or because as until while of at by for with about against between into through during before after
+above below to from up down in out on off over under again further then once here there when where
+why how all any both each few more most other some such no nor not only own same so than too very
+s t can will just don should now d ll m o re ve y ain aren couldn didn doesn hadn hasn haven isn
+ma mightn mustn needn shan shouldn wasn weren won wouldn please let
+""".split())
+
+_TOKEN = re.compile(r"[a-z]+|[0-9]+")
+_POSSESSIVE = re.compile(r"['\u2019]s\b")
+_APOSTROPHE = re.compile(r"['\u2019]")
+
+
+def tokenize(text: str) -> List[str]:
+    """Lower-case words and numbers of `text` (underscores, hyphens, digits all separate)."""
+    text = _APOSTROPHE.sub("", _POSSESSIVE.sub("", text.lower()))
+    return _TOKEN.findall(text)
+
+
+def content_words(text_or_tokens) -> List[str]:
+    """The tokens of a phrase without stop words; all tokens if every one is a stop word."""
+    tokens = tokenize(text_or_tokens) if isinstance(text_or_tokens, str) else list(text_or_tokens)
+    content = [token for token in tokens if token not in STOPWORDS]
+    return content or tokens
+
+
+def is_number(token: str) -> bool:
+    return token.isdigit()
+
+
+def trigrams(word: str) -> FrozenSet[str]:
+    padded = f"#{word}#"
+    return frozenset(padded[i:i + 3] for i in range(max(len(padded) - 2, 1)))
+
+
+def spelling_similarity(a: str, b: str) -> float:
+    """Dice coefficient of the padded character trigrams; numbers are equal or not at all."""
+    if a == b:
+        return 1.0
+    if is_number(a) or is_number(b):
+        return 0.0
+    grams_a, grams_b = trigrams(a), trigrams(b)
+    return 2.0 * len(grams_a & grams_b) / (len(grams_a) + len(grams_b))
+
+
+def string_baseline_score(query_tokens: Sequence[str], label_tokens: Sequence[str]) -> float:
+    """Plain string-similarity baseline: mean over query words of the best-spelled label word."""
+    if not query_tokens or not label_tokens:
+        return 0.0
+    return sum(max(spelling_similarity(q, t) for t in label_tokens)
+               for q in query_tokens) / len(query_tokens)
+
+
+class SpellingIndex:
+    """Finds the vocabulary word spelled most like a word, by shared character trigrams.
+
+    Args:
+        words: the vocabulary (e.g. the model's most frequent words; numbers are skipped).
+        min_similarity: below this Dice similarity there is no match.
+    """
+
+    def __init__(self, words: Iterable[str], *, min_similarity: float = 0.6):
+        self.min_similarity = min_similarity
+        self._words: List[str] = []
+        self._grams: List[FrozenSet[str]] = []
+        self._postings: Dict[str, List[int]] = defaultdict(list)
+        for word in words:
+            if not word.isalpha() or len(word) < 3:
+                continue
+            grams = trigrams(word)
+            index = len(self._words)
+            self._words.append(word)
+            self._grams.append(grams)
+            for gram in grams:
+                self._postings[gram].append(index)
+
+    def __len__(self) -> int:
+        return len(self._words)
+
+    def nearest(self, word: str) -> Optional[Tuple[str, float]]:
+        """(vocabulary word, similarity) of the best match at least `min_similarity`, or None."""
+        if is_number(word) or len(word) < 3:
+            return None
+        grams = trigrams(word)
+        shared: Dict[int, int] = defaultdict(int)
+        for gram in grams:
+            for index in self._postings.get(gram, ()):
+                shared[index] += 1
+        best, best_score = None, 0.0
+        for index, count in shared.items():
+            score = 2.0 * count / (len(grams) + len(self._grams[index]))
+            # Ties go to the earlier (more frequent) word: the index is in vocabulary order.
+            if score > best_score or (score == best_score and best is not None and index < best):
+                best, best_score = index, score
+        if best is None or best_score < self.min_similarity or self._words[best] == word:
+            return None
+        return self._words[best], best_score

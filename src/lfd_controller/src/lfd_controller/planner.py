@@ -1,0 +1,156 @@
+"""Trajectory optimisation of a reward through the unicycle dynamics, and the receding-horizon
+controller that drives with a learned reward (no ROS).
+
+The trajectory reward R(U) = sum_t r(x_t, u_t, t) is maximised over the commands U with L-BFGS-B;
+its gradient comes from the adjoint pass (lambda_t = dR/dx_t, g_t = r_u + B_t^T lambda_t).
+"""
+import time
+from typing import Optional, Sequence
+
+import numpy as np
+from scipy.optimize import minimize
+
+from lfd_controller.errors import LfdError
+from lfd_controller.features import Task
+
+COMMAND_BOUND = 1.5   # commands are bounded to 1.5 x the limits (the smooth limit gives ~96% there)
+
+
+def trajectory_reward(reward, model, task: Task, start, t0: float, actions, *, gradient: bool = True,
+                      terminal: float = 0.0):
+    """R(U) and dR/dU (T, 2) for commands `actions` (T, 2) from `start` at episode time t0.
+
+    terminal > 0 counts the last step's reward 1 + terminal times (the reward of holding the final
+    state a while longer: a cost-to-go estimate for receding-horizon control)."""
+    actions = np.asarray(actions, dtype=float).reshape(-1, 2)
+    count = len(actions)
+    states = model.rollout(start, actions)
+    times = t0 + model.dt * np.arange(1, count + 1)
+    if not gradient:
+        values = reward.derivatives(states, actions, times, task, order=0).value
+        return float(values.sum() + terminal * values[-1]), None
+    previous = np.vstack([start, states[:-1]])
+    _, a_mats, b_mats, _ = model.step_derivatives(previous, actions, second=False)
+    rd = reward.derivatives(states, actions, times, task, order=1)
+    if terminal:
+        scale = 1.0 + terminal
+        rd.value[-1] *= scale
+        rd.rx[-1] *= scale
+        rd.ru[-1] *= scale
+    lam = rd.rx[-1].copy()
+    grad = np.empty_like(actions)
+    for t in range(count - 1, -1, -1):
+        if t < count - 1:
+            lam = rd.rx[t] + a_mats[t + 1].T @ lam
+        grad[t] = rd.ru[t] + b_mats[t].T @ lam
+    return float(rd.value.sum()), grad
+
+
+def command_bounds(model, count: int):
+    lim = model.limits
+    return [(-COMMAND_BOUND * lim.v_max, COMMAND_BOUND * lim.v_max),
+            (-COMMAND_BOUND * lim.w_max, COMMAND_BOUND * lim.w_max)] * count
+
+
+def optimise_commands(reward, model, task: Task, start, t0: float, initial, *, max_iter: int = 200,
+                      terminal: float = 0.0):
+    """Locally optimal commands from `initial` (T, 2); returns (commands, R)."""
+    initial = np.asarray(initial, dtype=float)
+    shape = initial.shape
+
+    def negative(flat):
+        value, grad = trajectory_reward(reward, model, task, start, t0, flat.reshape(shape),
+                                        terminal=terminal)
+        return -value, -grad.reshape(-1)
+    res = minimize(negative, initial.reshape(-1), jac=True, method="L-BFGS-B",
+                   bounds=command_bounds(model, shape[0]),
+                   options={"maxiter": max_iter, "gtol": 1e-7, "ftol": 1e-12})
+    return res.x.reshape(shape), -float(res.fun)
+
+
+def seed_commands(model, count: int, turns: Sequence[float] = (0.0, 0.8, -0.8, 1.6, -1.6),
+                  speed: float = 0.7) -> list:
+    """Initial guesses: forward at `speed` x v_max with turn profiles a sin(pi t / T)."""
+    phase = np.sin(np.pi * (np.arange(count) + 0.5) / count)
+    return [np.stack([np.full(count, speed * model.limits.v_max), turn * phase], axis=1)
+            for turn in turns]
+
+
+def plan_from_seeds(reward, model, task: Task, start, t0: float, count: int, *, max_iter: int = 200,
+                    seeds: Optional[list] = None):
+    """The best locally optimal plan over several initial guesses: (commands, R)."""
+    best = None
+    for seed in seeds or seed_commands(model, count):
+        plan, value = optimise_commands(reward, model, task, start, t0, seed, max_iter=max_iter)
+        if best is None or value > best[1]:
+            best = (plan, value)
+    return best
+
+
+class RecedingHorizonController:
+    """Re-plans `horizon` steps of the reward from the current state at every call (warm-started
+    from the previous plan, shifted by the time that passed, plus turning seeds) and returns the
+    first command.
+
+    Args:
+        reward: a LinearReward or GPReward; model: robot_sim Unicycle.
+        horizon: planning steps of plan_dt (None: model.dt; a coarser step looks further ahead
+        for the same cost); terminal: extra weight of the last step's reward
+        (holding the final state longer: a cost-to-go estimate that keeps the short horizon from
+        stopping in front of an obstacle); max_iter: L-BFGS iterations for the warm start;
+        seed_iter: iterations for each alternative seed (0 = no seeds after the first plan), tried
+        every `seed_every` calls (turning seeds find ways around an obstacle that the warm start,
+        a local optimum, misses).
+    """
+
+    def __init__(self, reward, model, *, horizon: int = 20, plan_dt: Optional[float] = 0.2,
+                 terminal: float = 10.0, max_iter: int = 15, seed_iter: int = 6, seed_every: int = 5,
+                 seed_turns: Sequence[float] = (0.0, 1.2, -1.2)):
+        if horizon < 2:
+            raise LfdError(f"the planning horizon must be at least 2 steps, got {horizon}")
+        if plan_dt is not None and not plan_dt > 0:
+            raise LfdError(f"the planning step must be positive, got {plan_dt}")
+        self.reward, self.horizon = reward, int(horizon)
+        self.model = model if plan_dt is None else type(model)(plan_dt, model.limits)
+        self.max_iter, self.seed_iter, self.seed_turns = max_iter, seed_iter, seed_turns
+        self.seed_every = max(1, int(seed_every))
+        self.terminal = float(terminal)
+        self.reset()
+
+    def reset(self) -> None:
+        self.plan_: Optional[np.ndarray] = None
+        self._plan_time: Optional[float] = None
+        self.cycle_times_: list = []
+
+    def _warm_start(self, t: float) -> Optional[np.ndarray]:
+        if self.plan_ is None or self._plan_time is None:
+            return None
+        shift = (t - self._plan_time) / self.model.dt
+        if shift < 0 or shift >= self.horizon - 1:
+            return None
+        steps = np.arange(self.horizon) + shift
+        return np.column_stack([np.interp(steps, np.arange(self.horizon), self.plan_[:, i]) for i in (0, 1)])
+
+    def act(self, state, t: float, task: Task) -> np.ndarray:
+        """The command to apply now at state (5,) and episode time t."""
+        started = time.perf_counter()
+        warm = self._warm_start(t)
+        seeds = seed_commands(self.model, self.horizon, self.seed_turns)
+        candidates = []
+        if warm is not None:
+            candidates.append(optimise_commands(self.reward, self.model, task, state, t, warm,
+                                                max_iter=self.max_iter, terminal=self.terminal))
+            seeds_iter = self.seed_iter if len(self.cycle_times_) % self.seed_every == 0 else 0
+        else:
+            seeds_iter = self.max_iter
+        if seeds_iter > 0:
+            for seed in seeds:
+                candidates.append(optimise_commands(self.reward, self.model, task, state, t, seed,
+                                                    max_iter=seeds_iter, terminal=self.terminal))
+        plan, _ = max(candidates, key=lambda item: item[1])
+        self.plan_, self._plan_time = plan, t
+        self.cycle_times_.append(time.perf_counter() - started)
+        return plan[0].copy()
+
+    def planned_states(self, state) -> np.ndarray:
+        return self.model.rollout(state, self.plan_) if self.plan_ is not None else np.empty((0, 5))

@@ -1,0 +1,142 @@
+"""RewardControllerNode: drives with a learned reward by receding-horizon optimisation."""
+import threading
+import time
+
+import numpy as np
+import rospy
+from geometry_msgs.msg import PoseStamped, Twist
+from nav_msgs.msg import Odometry, Path
+from sensor_msgs.msg import TimeReference
+from std_msgs.msg import Float64, String
+from std_srvs.srv import SetBool, SetBoolResponse
+
+from lfd_controller.features import Task
+from lfd_controller.planner import RecedingHorizonController
+from lfd_controller.ros_common import odom_state
+from robot_sim.errors import SimError
+from robot_sim.maps import yaw_to_quaternion
+from robot_sim.scenarios import scenario_from_yaml
+from robot_sim.unicycle import Unicycle, UnicycleLimits
+
+
+class RewardControllerNode:
+    """Re-plans from the latest odometry at ~rate Hz and publishes the first command.
+
+    Parameters (defaults in config/reward_controller.yaml):
+      ~rate (double, 10), ~horizon (int, 20), ~plan_dt (double, 0.2), ~terminal (double, 10),
+      ~max_iter (int, 15), ~goal_tolerance (double, 0.25): stop (zero command) inside it,
+      ~v_max, ~w_max, ~a_max, ~alpha_max: the robot's limits (the scenario's when one is received),
+      ~obstacle_radius (double, 0.25), ~frame (str, "odom"), ~enabled (bool, true).
+    Topics in: odom (nav_msgs/Odometry), goal (geometry_msgs/PoseStamped), obstacle
+      (nav_msgs/Odometry: position and velocity; predicted at constant velocity), scenario
+      (std_msgs/String; optional: time-indexed obstacle and limits from the simulator's scenario),
+      sim_time (sensor_msgs/TimeReference; optional: episode time for the scenario's obstacle).
+    Topics out: cmd_vel (geometry_msgs/Twist), ~plan (nav_msgs/Path, while someone listens),
+      ~cycle_time (std_msgs/Float64: seconds spent planning each cycle).
+    Services: ~enable (std_srvs/SetBool): start or stop driving (stopping publishes a zero command).
+    """
+
+    def __init__(self, reward):
+        self.reward, self.lock = reward, threading.Lock()
+        self.frame = rospy.get_param("~frame", "odom")
+        self.tolerance = float(rospy.get_param("~goal_tolerance", 0.25))
+        self.obstacle_radius = float(rospy.get_param("~obstacle_radius", 0.25))
+        self.enabled = bool(rospy.get_param("~enabled", True))
+        limits = UnicycleLimits(**{k: float(rospy.get_param(f"~{k}", getattr(UnicycleLimits, k)))
+                                   for k in ("v_max", "w_max", "a_max", "alpha_max")})
+        self.options = {"horizon": int(rospy.get_param("~horizon", 20)),
+                        "plan_dt": float(rospy.get_param("~plan_dt", 0.2)),
+                        "terminal": float(rospy.get_param("~terminal", 10.0)),
+                        "max_iter": int(rospy.get_param("~max_iter", 15))}
+        self.controller = RecedingHorizonController(reward, Unicycle(0.1, limits), **self.options)
+        self.state = self.goal = self.obstacle = self.scenario = self.episode_time = None
+        self.cmd = rospy.Publisher("cmd_vel", Twist, queue_size=5)
+        self.plan = rospy.Publisher("~plan", Path, queue_size=2)
+        self.cycle = rospy.Publisher("~cycle_time", Float64, queue_size=10)
+        rospy.Subscriber("odom", Odometry, self.on_odom, queue_size=1)
+        rospy.Subscriber("goal", PoseStamped, self.on_goal, queue_size=1)
+        rospy.Subscriber("obstacle", Odometry, self.on_obstacle, queue_size=1)
+        rospy.Subscriber("scenario", String, self.on_scenario, queue_size=1)
+        rospy.Subscriber("sim_time", TimeReference, self.on_time, queue_size=1)
+        rospy.Service("~enable", SetBool, self.on_enable)
+        self.timer = rospy.Timer(rospy.Duration(1.0 / float(rospy.get_param("~rate", 10.0))), self.tick)
+
+    def on_odom(self, msg):
+        with self.lock:
+            self.state = (np.array(odom_state(msg)), time.monotonic())
+
+    def on_goal(self, msg):
+        with self.lock:
+            self.goal = np.array([msg.pose.position.x, msg.pose.position.y])
+
+    def on_obstacle(self, msg):
+        twist = msg.twist.twist
+        with self.lock:
+            self.obstacle = (np.array([msg.pose.pose.position.x, msg.pose.pose.position.y]),
+                             np.array([twist.linear.x, twist.linear.y]), time.monotonic())
+
+    def on_scenario(self, msg):
+        try:
+            scenario = scenario_from_yaml(msg.data)
+        except SimError as err:
+            rospy.logwarn(f"reward_controller: ignored scenario: {err}")
+            return
+        with self.lock:
+            self.scenario = scenario
+            self.controller = RecedingHorizonController(self.reward, scenario.model(), **self.options)
+
+    def on_time(self, msg):
+        with self.lock:
+            self.episode_time = (msg.time_ref.to_sec(), time.monotonic())
+
+    def on_enable(self, request):
+        with self.lock:
+            self.enabled = bool(request.data)
+            self.controller.reset()
+        if not request.data:
+            self.cmd.publish(Twist())
+        return SetBoolResponse(True, "driving" if request.data else "stopped")
+
+    def task_now(self):
+        """(Task, episode time) from what is known: the scenario's time-indexed obstacle when the
+        simulator's time is known, else a constant-velocity prediction from the obstacle topic."""
+        now = time.monotonic()
+        if self.scenario is not None and self.episode_time is not None:
+            t = self.episode_time[0]      # the episode time of the latest step (odom comes with it)
+            goal = self.goal if self.goal is not None else self.scenario.goal
+            return Task(goal, self.scenario.obstacle.position, self.scenario.obstacle.radius), t
+        if self.goal is None or self.obstacle is None:
+            return None, 0.0
+        position, velocity, seen = self.obstacle
+        return Task.constant_velocity(self.goal, position + velocity * (now - seen), velocity, 0.0,
+                                      self.obstacle_radius), 0.0
+
+    def tick(self, _event):
+        with self.lock:
+            if not self.enabled or self.state is None:
+                return
+            state = self.state[0]
+            task, t = self.task_now()
+        if task is None:
+            rospy.logwarn_throttle(5.0, "reward_controller: waiting for goal and obstacle")
+            return
+        twist = Twist()
+        if np.linalg.norm(state[:2] - task.goal) > self.tolerance:
+            started = time.perf_counter()
+            twist.linear.x, twist.angular.z = self.controller.act(state, t, task)
+            self.cycle.publish(Float64(time.perf_counter() - started))
+        self.cmd.publish(twist)
+        if self.plan.get_num_connections() > 0:
+            self.publish_plan(state)
+
+    def publish_plan(self, state):
+        path = Path()
+        path.header.stamp, path.header.frame_id = rospy.Time.now(), self.frame
+        for x, y, yaw, _, _ in self.controller.planned_states(state):
+            pose = PoseStamped()
+            pose.header = path.header
+            pose.pose.position.x, pose.pose.position.y = x, y
+            q = pose.pose.orientation
+            q.x, q.y, q.z, q.w = yaw_to_quaternion(yaw)
+            path.poses.append(pose)
+        self.plan.publish(path)

@@ -1,0 +1,149 @@
+"""DemoRecorderNode: records demonstrations from the robot's topics into bags and the database."""
+import os
+import threading
+from pathlib import Path
+
+import rospy
+from geometry_msgs.msg import Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from sensor_msgs.msg import TimeReference
+from std_msgs.msg import Bool, String
+from std_srvs.srv import Trigger, TriggerResponse
+
+from lfd_controller import ros_demos
+from lfd_controller.errors import DemonstrationError
+from lfd_controller.msg import Demonstration as DemonstrationMsg
+from lfd_controller.recording import DemoBuilder, SampleMatcher
+from lfd_controller.ros_common import odom_state
+from robot_sim.errors import SimError
+from robot_sim.scenarios import scenario_from_yaml
+
+
+class DemoRecorderNode:
+    """Records one demonstration between ~start and ~stop.
+
+    Parameters (defaults in config/demo_recorder.yaml):
+      ~bag_dir (str, "$ROS_HOME/lfd_demos"): one bag per demonstration ("" = no bags).
+      ~db_url (str, ""): ros_mongo store URL (CouchDB or mongodb://...; "" = no database).
+      ~source (str, "joystick"): who demonstrates (stored with the demo, used as a tag).
+      ~min_steps (int, 5), ~use_applied_cmd (bool, true): pair odom with the simulator's
+      cmd_vel_applied and sim_time by stamp (exact); false: odom with the latest cmd_vel (robot).
+    Topics in: odom, cmd_vel_applied (geometry_msgs/TwistStamped), sim_time
+      (sensor_msgs/TimeReference), cmd_vel (Twist; robot mode), scenario (std_msgs/String YAML).
+    Topics out: ~demonstrations (lfd_controller/Demonstration, latched: the last one), ~recording
+      (std_msgs/Bool, latched).
+    Services: ~start, ~stop (std_srvs/Trigger; stop answers with where the demo was stored).
+    """
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.builder = DemoBuilder(int(rospy.get_param("~min_steps", 5)))
+        self.matcher = SampleMatcher()
+        bag_dir = rospy.get_param("~bag_dir", os.path.join(os.environ.get("ROS_HOME", "~/.ros"), "lfd_demos"))
+        self.bag_dir = Path(bag_dir).expanduser() if bag_dir else None
+        self.db_url = rospy.get_param("~db_url", "")
+        self.source = rospy.get_param("~source", "joystick")
+        self.scenario, self.raw, self.count = None, [], 0
+        self.latest_cmd, self.first_stamp = (0.0, 0.0), None
+        self.demos = rospy.Publisher("~demonstrations", DemonstrationMsg, queue_size=5, latch=True)
+        self.recording = rospy.Publisher("~recording", Bool, queue_size=1, latch=True)
+        self.recording.publish(Bool(False))
+        rospy.Subscriber("scenario", String, self.on_scenario, queue_size=1)
+        rospy.Subscriber("odom", Odometry, self.on_odom, queue_size=50)
+        if rospy.get_param("~use_applied_cmd", True):
+            rospy.Subscriber("cmd_vel_applied", TwistStamped, self.on_applied, queue_size=50)
+            rospy.Subscriber("sim_time", TimeReference, self.on_time, queue_size=50)
+            self.exact = True
+        else:
+            rospy.Subscriber("cmd_vel", Twist, self.on_cmd, queue_size=50)
+            self.exact = False
+        rospy.Service("~start", Trigger, self.on_start)
+        rospy.Service("~stop", Trigger, self.on_stop)
+
+    def on_scenario(self, msg):
+        try:
+            scenario = scenario_from_yaml(msg.data)
+        except SimError as err:
+            rospy.logwarn(f"demo_recorder: ignored scenario: {err}")
+            return
+        with self.lock:
+            self.scenario = scenario
+
+    def _sample(self, key, part, value, raw):
+        with self.lock:
+            step = self.matcher.add(key, part, value)
+            if self.builder.recording:
+                self.raw.append(raw)
+            if step is not None:
+                self.builder.observe(step["state"], step["command"], step["time"])
+
+    def on_odom(self, msg):
+        raw = ("/odom", msg, msg.header.stamp)
+        if self.exact:
+            self._sample(msg.header.stamp, "state", odom_state(msg), raw)
+            return
+        with self.lock:
+            self.first_stamp = self.first_stamp or msg.header.stamp
+            t = (msg.header.stamp - self.first_stamp).to_sec()
+            if self.builder.recording:
+                self.raw.append(raw)
+            self.builder.observe(odom_state(msg), self.latest_cmd, t)
+
+    def on_applied(self, msg):
+        self._sample(msg.header.stamp, "command", (msg.twist.linear.x, msg.twist.angular.z),
+                     ("/cmd_vel_applied", msg, msg.header.stamp))
+
+    def on_time(self, msg):
+        self._sample(msg.header.stamp, "time", msg.time_ref.to_sec(), ("/sim_time", msg, msg.header.stamp))
+
+    def on_cmd(self, msg):
+        with self.lock:
+            self.latest_cmd = (msg.linear.x, msg.angular.z)
+
+    def on_start(self, _request):
+        with self.lock:
+            if self.scenario is None:
+                return TriggerResponse(False, "no scenario received yet on 'scenario'; not recording")
+            try:
+                self.builder.start()
+            except DemonstrationError as err:
+                return TriggerResponse(False, str(err))
+            self.raw = []
+        self.recording.publish(Bool(True))
+        return TriggerResponse(True, f"recording demonstration {self.count + 1} in {self.scenario.name}")
+
+    def on_stop(self, _request):
+        with self.lock:
+            try:
+                demo = self.builder.stop(self.scenario, self.source)
+            except DemonstrationError as err:
+                self.recording.publish(Bool(False))
+                return TriggerResponse(False, str(err))
+            raw, self.raw = self.raw, []
+        self.recording.publish(Bool(False))
+        self.count += 1
+        msg = ros_demos.to_msg(demo, rospy.Time.now())
+        self.demos.publish(msg)
+        return TriggerResponse(*self.persist(msg, raw, demo.meta.get("model_error", 0.0)))
+
+    def persist(self, msg, raw, model_error):
+        """Bag first, then the database; a failure of one keeps the other and says so."""
+        parts, ok = [f"demonstration {self.count}: {len(msg.commands) // 2} steps, "
+                     f"model error {model_error:.3g} m"], True
+        if self.bag_dir is not None:
+            name = f"demo_{msg.scenario_name}_{msg.header.stamp.to_nsec()}.bag"
+            try:
+                parts.append(f"bag {ros_demos.write_bag(self.bag_dir / name, msg, raw)}")
+            except (OSError, DemonstrationError) as err:
+                ok = False
+                parts.append(f"bag NOT written: {err}")
+        if self.db_url:
+            from ros_mongo import StoreError, open_store
+
+            try:
+                with open_store(self.db_url) as store:
+                    parts.append(f"database id {ros_demos.store_demo(store, msg)}")
+            except StoreError as err:
+                ok = False
+                parts.append(f"database NOT written: {err}")
+        return ok, "; ".join(parts)

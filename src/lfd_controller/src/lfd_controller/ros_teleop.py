@@ -1,0 +1,52 @@
+"""JoyTeleopNode: sensor_msgs/Joy -> cmd_vel, and recording buttons -> the recorder's services."""
+import threading
+
+import rospy
+from geometry_msgs.msg import Twist
+from sensor_msgs.msg import Joy
+from std_srvs.srv import Trigger
+
+from lfd_controller.teleop import JoyMapping, JoyTeleop
+
+PARAMS = ("axis_linear", "axis_angular", "scale_linear", "scale_angular", "deadzone", "enable_button",
+          "record_start_button", "record_stop_button")
+
+
+class JoyTeleopNode:
+    """Drives from a joystick while the dead-man button is held.
+
+    Parameters (defaults in config/joy_teleop.yaml; Xbox 360 pad under the joy driver):
+      ~axis_linear (int, 1), ~axis_angular (int, 0), ~scale_linear (double, 0.5 m/s),
+      ~scale_angular (double, 1.5 rad/s), ~deadzone (double, 0.05), ~enable_button (int, 4: LB),
+      ~record_start_button (int, 0: A), ~record_stop_button (int, 1: B), ~recorder (str,
+      "demo_recorder": its ~start/~stop services are called on the recording buttons).
+    Topics: joy (sensor_msgs/Joy) in; cmd_vel (geometry_msgs/Twist) out: one per Joy message while
+      enabled, one zero command on release.
+    """
+
+    def __init__(self):
+        defaults = JoyMapping()
+        values = {name: rospy.get_param(f"~{name}", getattr(defaults, name)) for name in PARAMS}
+        self.teleop = JoyTeleop(JoyMapping(**values))
+        recorder = rospy.get_param("~recorder", "demo_recorder").rstrip("/")
+        self.services = {"start": f"{recorder}/start", "stop": f"{recorder}/stop"}
+        self.cmd = rospy.Publisher("cmd_vel", Twist, queue_size=5)
+        rospy.Subscriber("joy", Joy, self.on_joy, queue_size=5)
+
+    def on_joy(self, msg: Joy) -> None:
+        command, events = self.teleop.update(msg.axes, msg.buttons)
+        if command is not None:
+            twist = Twist()
+            twist.linear.x, twist.angular.z = command
+            self.cmd.publish(twist)
+        for event in events:
+            threading.Thread(target=self.call, args=(self.services[event],), daemon=True).start()
+
+    def call(self, service: str) -> None:
+        try:
+            rospy.wait_for_service(service, timeout=2.0)
+            response = rospy.ServiceProxy(service, Trigger)()
+            log = rospy.loginfo if response.success else rospy.logwarn
+            log(f"joy_teleop: {service}: {response.message}")
+        except (rospy.ROSException, rospy.ServiceException) as err:
+            rospy.logwarn(f"joy_teleop: {service} failed: {err}")

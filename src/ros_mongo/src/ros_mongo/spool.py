@@ -1,0 +1,187 @@
+"""A local append-only spool file for records the database could not take yet.
+
+Each entry is one frame: magic b"RMS1", header length, payload length, CRC-32 (all uint32 little
+endian), a JSON header, then the payload (the exact serialized message bytes). How far the file has
+been drained into the database is kept in `<path>.offset` (replaced atomically); once everything is
+drained the file is emptied. A torn last frame (the process was killed mid-write) is cut off when the
+spool is opened again. Entries are either topic infos or message records; records keep their ids, so
+draining an entry twice (killed between insert and offset update) still stores it once.
+"""
+import fcntl
+import json
+import os
+import struct
+import threading
+import zlib
+from dataclasses import asdict
+from pathlib import Path
+from typing import List, Tuple, Union
+
+from ros_mongo.errors import SpoolError
+from ros_mongo.records import MessageRecord, TopicInfo
+
+__all__ = ["Spool"]
+
+MAGIC = b"RMS1"
+_FRAME = struct.Struct("<4sIII")
+_EXCLUSIVE_NONBLOCKING = fcntl.LOCK_EX + fcntl.LOCK_NB  # (distinct bits; "|" trips vermin's 3.10 check)
+Entry = Union[TopicInfo, MessageRecord]
+
+
+class Spool:
+    """Append entries, read them back in order from the drained offset, commit what was drained.
+
+    Args:
+        path: the spool file (its directory is created).
+        fsync: also fsync after each append (survives power loss, not only a killed process).
+    """
+
+    def __init__(self, path: Union[str, Path], *, fsync: bool = False):
+        self.path = Path(path)
+        self.offset_path = Path(str(self.path) + ".offset")
+        self.fsync = fsync
+        self._lock = threading.Lock()
+        self._file = None
+        self._end = 0
+        self._offset = 0
+        self.pending_records = 0
+        self.generation = 0  # counts the times the file was emptied after a full drain
+
+    def open(self) -> "Spool":
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._file = open(self.path, "a+b")
+            fcntl.flock(self._file.fileno(), _EXCLUSIVE_NONBLOCKING)
+        except BlockingIOError:
+            self._file.close()
+            raise SpoolError(f"spool {self.path} is in use by another recorder") from None
+        except OSError as err:
+            raise SpoolError(f"cannot open spool {self.path}: {err}") from err
+        self._offset = self._read_offset()
+        self._end, self.pending_records = self._scan_valid_end()
+        size = os.fstat(self._file.fileno()).st_size
+        if size > self._end:  # a torn frame from a killed process
+            self._file.truncate(self._end)
+        return self
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+    @property
+    def pending(self) -> bool:
+        return self._end > self._offset
+
+    @property
+    def pending_bytes(self) -> int:
+        return self._end - self._offset
+
+    def append(self, entries: List[Entry]) -> None:
+        """Write entries at the end (flushed to the OS before returning)."""
+        frames, records = [], 0
+        for entry in entries:
+            frames.append(_frame(entry))
+            records += isinstance(entry, MessageRecord)
+        data = b"".join(frames)
+        with self._lock:
+            try:
+                self._file.seek(0, os.SEEK_END)
+                self._file.write(data)
+                self._file.flush()
+                if self.fsync:
+                    os.fsync(self._file.fileno())
+            except OSError as err:
+                raise SpoolError(f"cannot write spool {self.path}: {err}") from err
+            self._end += len(data)
+            self.pending_records += records
+
+    def read(self, max_entries: int = 500, max_bytes: int = 16 * 1024 * 1024) -> Tuple[List[Entry], int]:
+        """Entries from the drained offset on, and the offset after them (for commit)."""
+        with self._lock:
+            offset, end = self._offset, self._end
+            entries, size = [], 0
+            with open(self.path, "rb") as reader:
+                reader.seek(offset)
+                while offset < end and len(entries) < max_entries and size < max_bytes:
+                    entry, length = _read_frame(reader)
+                    if entry is None:
+                        raise SpoolError(f"spool {self.path} is corrupt at byte {offset}")
+                    entries.append(entry)
+                    offset += length
+                    size += length
+            return entries, offset
+
+    def commit(self, offset: int, records: int) -> None:
+        """Mark everything before `offset` (holding `records` messages) as stored."""
+        with self._lock:
+            self._offset = offset
+            self.pending_records = max(0, self.pending_records - records)
+            if self._offset >= self._end:  # all drained: start over with an empty file
+                self._offset = 0
+                self._write_offset()  # first: killed before the truncation only re-drains (ids dedupe)
+                self._file.truncate(0)
+                self._end = self.pending_records = 0
+                self.generation += 1
+            else:
+                self._write_offset()
+
+    def _read_offset(self) -> int:
+        try:
+            return int(self.offset_path.read_text().strip() or 0)
+        except FileNotFoundError:
+            return 0
+        except (OSError, ValueError) as err:
+            raise SpoolError(f"cannot read spool offset {self.offset_path}: {err}") from err
+
+    def _write_offset(self) -> None:
+        temporary = Path(str(self.offset_path) + ".tmp")
+        try:
+            temporary.write_text(str(self._offset))
+            os.replace(temporary, self.offset_path)
+        except OSError as err:
+            raise SpoolError(f"cannot write spool offset {self.offset_path}: {err}") from err
+
+    def _scan_valid_end(self) -> Tuple[int, int]:
+        size = os.fstat(self._file.fileno()).st_size
+        if self._offset > size:  # emptied after the offset was written: drain all (ids dedupe)
+            self._offset = 0
+        offset, records = self._offset, 0
+        with open(self.path, "rb") as reader:
+            reader.seek(offset)
+            while offset < size:
+                entry, length = _read_frame(reader)
+                if entry is None:
+                    break
+                offset += length
+                records += isinstance(entry, MessageRecord)
+        return offset, records
+
+
+def _frame(entry: Entry) -> bytes:
+    if isinstance(entry, TopicInfo):
+        header, payload = {"kind": "topic", **asdict(entry)}, b""
+    else:
+        header = {"kind": "message", **{k: v for k, v in asdict(entry).items() if k != "raw"}}
+        payload = entry.raw
+    header_bytes = json.dumps(header, separators=(",", ":")).encode("utf-8")
+    crc = zlib.crc32(payload, zlib.crc32(header_bytes))
+    return _FRAME.pack(MAGIC, len(header_bytes), len(payload), crc) + header_bytes + payload
+
+
+def _read_frame(reader) -> Tuple[Union[Entry, None], int]:
+    head = reader.read(_FRAME.size)
+    if len(head) < _FRAME.size:
+        return None, 0
+    magic, header_len, payload_len, crc = _FRAME.unpack(head)
+    if magic != MAGIC:
+        return None, 0
+    header_bytes = reader.read(header_len)
+    payload = reader.read(payload_len)
+    if len(header_bytes) < header_len or len(payload) < payload_len \
+            or zlib.crc32(payload, zlib.crc32(header_bytes)) != crc:
+        return None, 0
+    header = json.loads(header_bytes.decode("utf-8"))
+    kind = header.pop("kind")
+    entry = TopicInfo(**header) if kind == "topic" else MessageRecord(raw=payload, **header)
+    return entry, _FRAME.size + header_len + payload_len

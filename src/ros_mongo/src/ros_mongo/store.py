@@ -1,0 +1,280 @@
+"""One store interface over two backends, chosen by the database URL.
+
+    store = open_store("http://127.0.0.1:5984/robot_data")      # CouchDB (the default backend)
+    store = open_store("mongodb://127.0.0.1:27017/robot_data")  # MongoDB (pymongo 4, GridFS)
+
+Backends implement a handful of primitives (`_insert`, `_put_topic_doc`, `_topic_docs`, `_docs`,
+`_count`, `_load_blob`, `_setup`, `ping`, `close`); everything users call lives here.
+"""
+import logging
+import threading
+import time
+from typing import Dict, Iterator, List, Optional, Sequence, Tuple, Union
+from urllib.parse import urlsplit, urlunsplit
+
+from ros_mongo import msgtypes
+from ros_mongo.errors import QueryError, StoreError, UnknownTypeError
+from ros_mongo.query import Query
+from ros_mongo.records import MessageRecord, StoredMessage, TopicInfo, make_record, split_time
+
+__all__ = ["MessageStore", "open_store", "redact_url", "BLOB_THRESHOLD"]
+
+log = logging.getLogger(__name__)
+
+#: Serialized messages larger than this go to attachments (CouchDB) or GridFS (MongoDB).
+BLOB_THRESHOLD = 256 * 1024
+
+
+def redact_url(url: str) -> str:
+    """`url` without its password (for logs and error messages)."""
+    parts = urlsplit(url)
+    if parts.password is None and "@" not in parts.netloc:
+        return url
+    host = parts.hostname or ""
+    if parts.port:
+        host = f"{host}:{parts.port}"
+    user = f"{parts.username}:***@" if parts.username else "***@"
+    return urlunsplit((parts.scheme, user + host, parts.path, parts.query, parts.fragment))
+
+
+class MessageStore:
+    """Stores ROS messages with their metadata; see the package README for the document layout.
+
+    Args:
+        url: the database URL (credentials are never logged).
+        blob_threshold: serialized sizes above this go to attachments / GridFS.
+        max_array_len: longer arrays are not decoded into the queryable fields.
+    """
+
+    backend = "none"
+
+    def __init__(self, url: str, *, blob_threshold: int = BLOB_THRESHOLD,
+                 max_array_len: int = msgtypes.MAX_ARRAY_LEN):
+        self.url = redact_url(url)
+        self.blob_threshold = int(blob_threshold)
+        self.max_array_len = int(max_array_len)
+        self._ready = False
+        self._ready_lock = threading.Lock()
+        self._known_topics: Dict[str, TopicInfo] = {}
+        self._definitions: Dict[Tuple[str, str], str] = {}
+        # how to open this database again (holds credentials: never log it)
+        self._reopen_args = (url, {"blob_threshold": self.blob_threshold,
+                                   "max_array_len": self.max_array_len})
+
+    def reopen_args(self) -> Tuple[str, dict]:
+        """(url, options) for `open_store` to reach the same database from another process.
+        The URL keeps its credentials: pass it on, never log it."""
+        return self._reopen_args
+
+    # -- set-up ------------------------------------------------------------------------------
+    def connect(self) -> "MessageStore":
+        """Create the database and its indexes if needed (StoreUnavailable when unreachable)."""
+        with self._ready_lock:
+            if not self._ready:
+                self._setup()
+                self._ready = True
+        return self
+
+    def _ensure(self) -> None:
+        if not self._ready:
+            self.connect()
+
+    # -- writing -----------------------------------------------------------------------------
+    def insert_message(self, topic: str, msg, *, tags: Sequence[str] = (),
+                       receive_time: Optional[float] = None, session_id: Optional[str] = None,
+                       robot_id: Optional[str] = None) -> str:
+        """Store one genpy message; returns its id once it is durably stored."""
+        cls = msg.__class__
+        if not hasattr(cls, "_md5sum") or not hasattr(msg, "serialize"):
+            raise StoreError(f"not a ROS message: {msg!r:.80}")
+        if isinstance(tags, str):
+            tags = [tags]
+        raw = _serialize(msg)
+        receive = split_time(time.time() if receive_time is None else receive_time)
+        record = make_record(topic, cls, raw, receive=receive, tags=tags, session_id=session_id,
+                             robot_id=robot_id, message=msg, max_array_len=self.max_array_len)
+        self.put_topic(TopicInfo.of_class(topic, cls))
+        self.insert_records([record])
+        return record.id
+
+    def insert_records(self, records: Sequence[MessageRecord]) -> int:
+        """Store records in batches; ids already stored are skipped (so retries store each once).
+
+        Returns the number of records newly stored. Their topic infos must be put first.
+        """
+        if not records:
+            return 0
+        self._ensure()
+        return self._insert(list(records))
+
+    def put_topic(self, info: TopicInfo) -> None:
+        """Keep a topic's definition and latching (once per topic, type and md5sum)."""
+        if info.id in self._known_topics:
+            return
+        self._ensure()
+        self._put_topic_doc(info)
+        self._known_topics[info.id] = info
+        self._definitions[(info.msg_type, info.md5sum)] = info.definition
+
+    # -- reading -----------------------------------------------------------------------------
+    def topics(self) -> List[TopicInfo]:
+        """Every stored topic info, sorted by topic."""
+        self._ensure()
+        infos = [_topic_from_doc(doc) for doc in self._topic_docs()]
+        for info in infos:
+            self._definitions[(info.msg_type, info.md5sum)] = info.definition
+        return sorted(infos, key=lambda i: (i.topic, i.msg_type))
+
+    def find_messages(self, *, topic: Union[str, Sequence[str], None] = None,
+                      msg_type: Optional[str] = None, tags: Union[str, Sequence[str], None] = None,
+                      session_id: Optional[str] = None, robot_id: Optional[str] = None,
+                      start_time: Optional[float] = None, end_time: Optional[float] = None,
+                      fields: Optional[dict] = None, newest_first: bool = False,
+                      limit: Optional[int] = None) -> Iterator[StoredMessage]:
+        """Stored messages matching every criterion, by receive time (QueryError if malformed)."""
+        query = Query.build(topic=topic, msg_type=msg_type, tags=tags, session_id=session_id,
+                            robot_id=robot_id, start_time=start_time, end_time=end_time, fields=fields)
+        return self.find(query, newest_first=newest_first, limit=limit)
+
+    def find(self, query: Query, *, newest_first: bool = False, limit: Optional[int] = None,
+             decoded: bool = True) -> Iterator[StoredMessage]:
+        """Like find_messages, with a prepared Query; `decoded=False` leaves out the decoded fields
+        (less to transfer when only the bytes are wanted, as in a replay)."""
+        if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int) or limit < 0):
+            raise QueryError(f"limit must be a non-negative integer, got {limit!r}")
+        self._ensure()
+        docs = self._docs(query, newest_first, limit, decoded)
+        return (self._stored(doc, raw) for doc, raw in docs)
+
+    def count(self, query: Optional[Query] = None) -> int:
+        """How many stored messages match `query` (all when None)."""
+        self._ensure()
+        return self._count(query or Query())
+
+    def count_messages(self, **criteria) -> int:
+        """count() with find_messages' keywords."""
+        return self.count(Query.build(**criteria))
+
+    def message_class(self, msg_type: str, md5sum: str) -> type:
+        """The class for a stored type: installed, or generated from the stored definition."""
+        try:
+            return msgtypes.message_class(msg_type, md5sum)
+        except UnknownTypeError:
+            pass
+        definition = self._definitions.get((msg_type, md5sum))
+        if definition is None:
+            self.topics()
+            definition = self._definitions.get((msg_type, md5sum))
+        return msgtypes.message_class(msg_type, md5sum, definition)
+
+    def _stored(self, doc: dict, raw: Optional[bytes]) -> StoredMessage:
+        return StoredMessage(doc, raw, self._load_blob, self.message_class)
+
+    # -- backend primitives ---------------------------------------------------------------------
+    def _setup(self) -> None:
+        raise NotImplementedError
+
+    def _insert(self, records: List[MessageRecord]) -> int:
+        raise NotImplementedError
+
+    def _put_topic_doc(self, info: TopicInfo) -> None:
+        raise NotImplementedError
+
+    def _topic_docs(self) -> List[dict]:
+        raise NotImplementedError
+
+    def _docs(self, query: Query, newest_first: bool, limit: Optional[int],
+              decoded: bool) -> Iterator[Tuple[dict, Optional[bytes]]]:
+        raise NotImplementedError
+
+    def _count(self, query: Query) -> int:
+        raise NotImplementedError
+
+    def _load_blob(self, message_id: str) -> bytes:
+        raise NotImplementedError
+
+    def ping(self) -> None:
+        """Raise StoreUnavailable unless the server answers."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release connections (the store can not be used afterwards)."""
+
+    def __enter__(self) -> "MessageStore":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.url!r})"
+
+
+def _serialize(msg) -> bytes:
+    from io import BytesIO
+
+    buffer = BytesIO()
+    try:
+        msg.serialize(buffer)
+    except Exception as err:  # noqa: BLE001 - genpy raises SerializationError, struct.error...
+        raise StoreError(f"cannot serialize {msg.__class__._type} message: {err}") from err
+    return buffer.getvalue()
+
+
+def _topic_from_doc(doc: dict) -> TopicInfo:
+    return TopicInfo(topic=doc["topic"], msg_type=doc["type"], md5sum=doc["md5sum"],
+                     definition=doc.get("definition", ""), latching=bool(doc.get("latching", False)),
+                     callerid=doc.get("callerid", ""))
+
+
+def topic_doc(info: TopicInfo) -> dict:
+    """The stored form of a topic info."""
+    return {"_id": info.id, "kind": "topic", "topic": info.topic, "type": info.msg_type,
+            "md5sum": info.md5sum, "definition": info.definition, "latching": info.latching,
+            "callerid": info.callerid}
+
+
+#: Top-level keys of a stored message besides the decoded fields ("msg") and the bytes ("raw").
+META_KEYS = ("_id", "topic", "type", "md5sum", "receive_time", "receive_secs", "receive_nsecs",
+             "header_stamp", "tags", "session_id", "robot_id", "size")
+
+
+def message_doc(record: MessageRecord) -> dict:
+    """The stored form of a message record, without its bytes (the backend adds those)."""
+    return {"_id": record.id, "kind": "message", "topic": record.topic, "type": record.msg_type,
+            "md5sum": record.md5sum, "receive_time": record.receive_time,
+            "receive_secs": record.receive_secs, "receive_nsecs": record.receive_nsecs,
+            "header_stamp": record.header_stamp, "tags": list(record.tags),
+            "session_id": record.session_id, "robot_id": record.robot_id,
+            "size": len(record.raw), "msg": record.fields}
+
+
+def open_store(url: str, *, connect: bool = True, **options) -> MessageStore:
+    """A store for `url`: http(s):// is CouchDB, mongodb:// (or mongodb+srv://) is MongoDB.
+
+    Args:
+        connect: create the database and indexes now (StoreUnavailable if the server is down);
+            with False the first operation does it (the recorder starts while the server is down).
+        options: blob_threshold, max_array_len, timeout (seconds).
+    """
+    if not isinstance(url, str) or "://" not in url:
+        raise StoreError(f"database URL must look like http://host:5984/db or mongodb://host:27017/db, "
+                         f"got {url!r}")
+    scheme = url.split("://", 1)[0].lower()
+    if scheme in ("http", "https"):
+        from ros_mongo.couch import CouchStore as backend
+    elif scheme in ("mongodb", "mongodb+srv"):
+        from ros_mongo.mongo import MongoStore as backend
+    else:
+        raise StoreError(f"unsupported database URL scheme {scheme!r} in {redact_url(url)} "
+                         f"(use http(s):// for CouchDB or mongodb:// for MongoDB)")
+    store = backend(url, **options)
+    store._reopen_args = (url, dict(options))
+    if connect:
+        try:
+            store.connect()
+        except BaseException:
+            store.close()
+            raise
+    log.debug("opened %s", store)
+    return store

@@ -1,0 +1,182 @@
+"""The storage library against the real servers (pouchdb-server and nx-27017), both backends."""
+import socket
+
+import pytest
+from nav_msgs.msg import Odometry
+from ros_mongo_samples import (
+    _header,
+    custom_class,
+    custom_message,
+    image,
+    joints,
+    odometry,
+    scan,
+    serialized,
+)
+from sensor_msgs.msg import PointCloud2, PointField
+from std_msgs.msg import String
+
+from ros_harness import http_get_json
+from ros_mongo import (
+    QueryError,
+    StoreError,
+    StoreUnavailable,
+    TopicInfo,
+    UnknownTypeError,
+    make_record,
+    open_store,
+)
+from ros_mongo.records import split_time
+
+pytestmark = pytest.mark.db
+
+@pytest.mark.parametrize("topic,make", [
+    ("/odom", odometry), ("/camera/rgb/image_raw", image), ("/scan", scan),
+    ("/joint_states", joints), ("/detections", custom_message)])
+def test_round_trip_keeps_bytes_and_metadata(db_url, topic, make):
+    msg = make()
+    with open_store(db_url) as store:
+        doc_id = store.insert_message(topic, msg, tags=["a", "b"], receive_time=1234.5,
+                                      session_id="s1", robot_id="r1")
+    with open_store(db_url) as store:  # a fresh store: nothing cached
+        [stored] = list(store.find_messages(topic=topic))
+        assert stored.id == doc_id
+        assert stored.raw == serialized(msg)
+        assert (stored.msg_type, stored.md5sum) == (msg._type, msg._md5sum)
+        assert stored.receive_time == 1234.5 and stored.tags == ["a", "b"]
+        assert (stored.session_id, stored.robot_id) == ("s1", "r1")
+        assert stored.header_stamp == pytest.approx(msg.header.stamp.to_sec())
+        again = stored.message()
+        assert serialized(again) == serialized(msg)
+        assert again.header.frame_id == msg.header.frame_id
+        [info] = store.topics()
+        assert (info.topic, info.msg_type, info.definition) == (topic, msg._type, msg._full_text)
+
+
+def test_decoded_fields_are_stored_and_safe(db_url):
+    with open_store(db_url) as store:
+        store.insert_message("/scan", scan())
+        store.insert_message("/camera/rgb/image_raw", image())
+        fields = {m.topic: m.fields for m in store.find_messages()}
+    assert fields["/scan"]["ranges"][3] == "Infinity" and fields["/scan"]["ranges"][5] == "NaN"
+    assert fields["/scan"]["header"]["frame_id"] == "laser"
+    assert fields["/camera/rgb/image_raw"]["encoding"] == "rgb8"
+    assert fields["/camera/rgb/image_raw"]["step"] == 192
+    assert fields["/camera/rgb/image_raw"]["data"] is None  # bytes only in raw
+
+
+def _fill(store):
+    for i in range(10):
+        store.insert_message("/odom", odometry(x=0.5 * i, frame="odom" if i % 2 else "map"),
+                             receive_time=100.0 + i, tags=["odom"] + (["even"] if i % 2 == 0 else []),
+                             session_id="s1" if i < 5 else "s2", robot_id="r1")
+    store.insert_message("/chatter", String(data="hello"), receive_time=104.5, tags=["even"])
+
+
+def _times(messages):
+    return [m.receive_time for m in messages]
+
+
+def test_queries(db_url):
+    with open_store(db_url) as store:
+        _fill(store)
+        assert _times(store.find_messages(topic="/odom", start_time=102, end_time=104)) == [102, 103, 104]
+        assert _times(store.find_messages(tags=["even"])) == [100, 102, 104, 104.5, 106, 108]
+        assert _times(store.find_messages(tags=["even", "odom"], session_id="s2")) == [106, 108]
+        assert _times(store.find_messages(msg_type="std_msgs/String")) == [104.5]
+        assert _times(store.find_messages(fields={"header.frame_id": "map"})) == [100, 102, 104, 106, 108]
+        x_range = {"pose.pose.position.x": {"$gte": 1.0, "$lt": 2.5}}
+        assert _times(store.find_messages(topic="/odom", fields=x_range)) == [102, 103, 104]
+        assert _times(store.find_messages(fields={"pose.pose.position.x": [3.5, 99]})) == [107, 108, 109]
+        assert _times(store.find_messages(newest_first=True, limit=3)) == [109, 108, 107]
+        assert _times(store.find_messages(topic=["/chatter", "/odom"], start_time=104, limit=3)) == \
+            [104, 104.5, 105]
+        assert store.count_messages(topic="/odom", robot_id="r1") == 10
+        assert store.count_messages(session_id="nobody") == 0
+
+
+def test_large_binary_goes_to_attachments_or_gridfs(db_url):
+    size = 9_000_000  # above CouchDB's 8,000,000-byte document limit
+    cloud = PointCloud2(header=_header(1, "velodyne"), height=1, width=size // 16,
+                        fields=[PointField("x", 0, PointField.FLOAT32, 1)], point_step=16,
+                        row_step=size, data=bytes(size), is_dense=True)
+    with open_store(db_url) as store:
+        doc_id = store.insert_message("/points", cloud)
+        [stored] = list(store.find_messages(topic="/points"))
+        assert stored.raw == serialized(cloud)
+        if store.backend == "couchdb":
+            doc = http_get_json(f"{db_url}/{doc_id}")
+            assert "raw" not in doc and doc["_attachments"]["raw"]["length"] == len(stored.raw)
+            assert len(str(doc)) < 100_000
+        else:
+            doc = store.messages.find_one({"_id": doc_id})
+            assert "raw" not in doc and doc["blob"] is True
+            assert store.db["blobs.files"].find_one({"_id": doc_id})["length"] == len(stored.raw)
+
+
+def test_repeated_records_are_stored_once(db_url):
+    with open_store(db_url) as store:
+        store.put_topic(TopicInfo.of_class("/odom", Odometry))
+        records = [make_record("/odom", Odometry, serialized(odometry(x=i)), receive=split_time(10 + i))
+                   for i in range(5)]
+        assert store.insert_records(records[:3]) == 3
+        assert store.insert_records(records) == 2  # a retry after an unknown outcome
+        assert store.count() == 5
+
+
+def test_custom_type_from_stored_definition_only(db_url):
+    msg = custom_message()
+    with open_store(db_url) as store:
+        store.insert_message("/detections", msg)
+        stored = next(store.find_messages(topic="/detections"))
+        decoded = stored.message()
+    assert decoded.label == "mug" and decoded.corners[1].y == 0.5
+    assert decoded.__class__ is not msg.__class__  # built from the definition in the database
+
+
+def test_unknown_type_without_definition(db_url):
+    record = make_record("/mystery", custom_class(), serialized(custom_message()))
+    record.msg_type, record.md5sum = "nowhere_msgs/Thing", "0" * 32
+    with open_store(db_url) as store:
+        store.insert_records([record])
+        stored = next(store.find_messages(topic="/mystery"))
+        assert stored.raw  # the bytes are kept even though the type is unknown
+        with pytest.raises(UnknownTypeError, match="nowhere_msgs/Thing.*not installed"):
+            stored.message()
+
+
+@pytest.mark.parametrize("criteria,match", [
+    (dict(fields={"pose.x": {"$regexx": "a"}}), "unknown operator '\\$regexx'"),
+    (dict(fields={"pose..x": 1}), "bad field path"),
+    (dict(fields={"pose.x": [1, 2, 3]}), "must be \\[low, high\\]"),
+    (dict(fields={"pose.x": {"$in": 5}}), "\\$in needs a list"),
+    (dict(start_time=10, end_time=5), "start_time 10.0 is after end_time 5.0"),
+    (dict(start_time="yesterday"), "start_time must be a finite number"),
+    (dict(topic=["/odom", 3]), "topic must be a string or a list"),
+    (dict(limit=-1), "limit must be a non-negative integer"),
+])
+def test_malformed_queries_are_clear(db_url, criteria, match):
+    with open_store(db_url) as store:
+        with pytest.raises(QueryError, match=match):
+            list(store.find_messages(**criteria))
+
+
+def test_unreachable_server_and_bad_urls():
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]  # bound but not listening: connections are refused
+        for url in (f"http://127.0.0.1:{port}/robot_data", f"mongodb://127.0.0.1:{port}/robot_data"):
+            with pytest.raises(StoreUnavailable, match="unreachable"):
+                open_store(url, timeout=1.0)
+    with pytest.raises(StoreError, match="unsupported database URL scheme 'ftp'"):
+        open_store("ftp://host/db")
+    with pytest.raises(StoreError, match="bad CouchDB database name"):
+        open_store("http://127.0.0.1:5984/Robot Data", connect=False)
+
+
+def test_credentials_never_shown():
+    store = open_store("http://alice:s3cret@127.0.0.1:9/robot_data", connect=False, timeout=0.5)
+    assert "s3cret" not in repr(store) and "alice:***@" in store.url
+    with pytest.raises(StoreUnavailable) as err:
+        store.ping()
+    assert "s3cret" not in str(err.value)

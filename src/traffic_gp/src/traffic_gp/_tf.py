@@ -1,0 +1,38 @@
+"""The one place that imports TensorFlow and GPflow: threads, float64 and the optimiser shim.
+
+TensorFlow >= 2.16 ships Keras 3, whose optimisers cannot minimise GPflow's variables; GPflow
+then needs the `tf_keras` package and exposes it as `gpflow.keras.tf_keras` (GPflow >= 2.9.1;
+on our Python 3.8 pin set, TF 2.13 + GPflow 2.9.2, that name is plain `tf.keras`, whose Adam
+has `minimize` too). Older GPflow has no `gpflow.keras`: then `tf.keras` is the right one.
+"""
+import os
+from types import SimpleNamespace
+
+_LIBS = {}
+
+
+def libs() -> SimpleNamespace:
+    """tensorflow (`tf`), `gpflow`, and `Adam` (a Keras-2 optimiser class), imported once.
+
+    Threads: `TRAFFIC_GP_TF_THREADS` (default: up to 2, the cores of our robots' computers) for
+    work inside one operation, one thread between operations.
+    """
+    if not _LIBS:
+        os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+        import tensorflow as tf
+
+        threads = int(os.environ.get("TRAFFIC_GP_TF_THREADS", min(2, os.cpu_count() or 1)))
+        try:
+            tf.config.threading.set_intra_op_parallelism_threads(threads)
+            tf.config.threading.set_inter_op_parallelism_threads(1)
+        except RuntimeError:  # TensorFlow was already running in this process: keep its threads
+            pass
+        import gpflow
+
+        try:
+            from gpflow.keras import tf_keras
+        except ImportError:  # GPflow < 2.9.1 (with TensorFlow < 2.16)
+            tf_keras = tf.keras
+        _LIBS.update(tf=tf, gpflow=gpflow, Adam=tf_keras.optimizers.Adam,
+                     versions=f"tensorflow {tf.__version__}, gpflow {gpflow.__version__}")
+    return SimpleNamespace(**_LIBS)

@@ -1,0 +1,169 @@
+"""GPflow pieces of the crowd model: the Poisson likelihood with exposure, the space-time kernel,
+the SVGP itself, its training step and its parameters as plain arrays.
+
+This module imports TensorFlow and GPflow (through `traffic_gp._tf`); import it only where a model
+is built or used.
+"""
+from typing import Dict, Tuple
+
+import numpy as np
+
+from traffic_gp._tf import libs
+from traffic_gp.errors import ModelFormatError
+
+_L = libs()
+tf, gpflow = _L.tf, _L.gpflow
+FLOAT = np.float64
+gpflow.config.set_default_float(FLOAT)
+GAUSS_HERMITE = np.polynomial.hermite.hermgauss(20)
+
+
+class PoissonExposure(gpflow.likelihoods.Likelihood):
+    """Counts with exposure: Y = [count, exposure]; count ~ Poisson(exposure * exp(f)).
+
+    `exp(f)` is the people density (per m^2); the exposure is the effective watched area, so a
+    half-seen cell or a longer watch changes the expected count, not the density.
+    """
+
+    def __init__(self):
+        super().__init__(input_dim=None, latent_dim=1, observation_dim=2)
+
+    def _log_prob(self, X, F, Y):
+        count, expo = Y[..., :1], Y[..., 1:]
+        log_rate = tf.math.log(expo) + F
+        return tf.reduce_sum(count * log_rate - tf.exp(log_rate) - tf.math.lgamma(count + 1.0), -1)
+
+    def _variational_expectations(self, X, Fmu, Fvar, Y):
+        count, expo = Y[..., :1], Y[..., 1:]
+        return tf.reduce_sum(count * (tf.math.log(expo) + Fmu) - expo * tf.exp(Fmu + Fvar / 2.0)
+                             - tf.math.lgamma(count + 1.0), -1)
+
+    def _predict_mean_and_var(self, X, Fmu, Fvar):
+        # Y's second column (the exposure) is not known here: per unit exposure.
+        mean = tf.exp(Fmu + Fvar / 2.0)
+        return mean, mean + (tf.exp(Fvar) - 1.0) * tf.square(mean)
+
+    def _predict_log_density(self, X, Fmu, Fvar, Y):
+        nodes, weights = GAUSS_HERMITE
+        count, expo = Y[..., :1], Y[..., 1:]
+        f = Fmu + tf.sqrt(2.0 * Fvar) * nodes                       # [..., n_nodes]
+        log_rate = tf.math.log(expo) + f
+        log_p = count * log_rate - tf.exp(log_rate) - tf.math.lgamma(count + 1.0)
+        return tf.reduce_logsumexp(log_p + np.log(weights / np.sqrt(np.pi)), axis=-1)
+
+
+def _space(lengthscale: float):
+    return gpflow.kernels.SquaredExponential(lengthscales=[lengthscale, lengthscale],
+                                             active_dims=[0, 1])
+
+
+def _cycle(period: float, lengthscale: float, variance: float = 1.0):
+    base = gpflow.kernels.SquaredExponential(variance=variance, lengthscales=lengthscale,
+                                             active_dims=[2])
+    kernel = gpflow.kernels.Periodic(base, period=period)
+    gpflow.set_trainable(kernel.period, False)
+    gpflow.set_trainable(base.variance, False)
+    return kernel
+
+
+def build_kernel(*, spatial_lengthscale: float, hourly: bool, weekly: bool):
+    """space x daily cycle [+ space x hourly cycle x daily (weekly) envelope]
+    [+ space x weekly cycle].
+
+    Periodic lengthscales are in units of the sine of the phase: 0.5 of a 24 h period is about
+    4 h, 0.3 of a 1 h period about 6 minutes (the rush before the hour).
+    """
+    parts = [_space(spatial_lengthscale) * _cycle(24.0, 0.6)]
+    if hourly:   # rushes: an hourly cycle whose strength varies over the day (or week)
+        envelope = _cycle(168.0, 0.1) if weekly else _cycle(24.0, 0.6)
+        parts.append(_space(spatial_lengthscale) * _cycle(1.0, 0.3) * envelope)
+    if weekly:
+        parts.append(_space(spatial_lengthscale * 2) * _cycle(168.0, 0.5))
+    return parts[0] if len(parts) == 1 else gpflow.kernels.Sum(parts)
+
+
+def build_model(inducing: np.ndarray, *, spatial_lengthscale: float, hourly: bool, weekly: bool,
+                log_mean: float, num_data: int, train_inducing: bool):
+    kernel = build_kernel(spatial_lengthscale=spatial_lengthscale, hourly=hourly, weekly=weekly)
+    model = gpflow.models.SVGP(kernel, PoissonExposure(),
+                               gpflow.inducing_variables.InducingPoints(inducing.astype(FLOAT)),
+                               mean_function=gpflow.mean_functions.Constant(np.array([log_mean])),
+                               num_latent_gps=1, whiten=True)
+    # A variable, so that online updates can grow the data set without retracing the step.
+    model.num_data = tf.Variable(float(num_data), dtype=FLOAT, trainable=False, name="num_data")
+    gpflow.set_trainable(model.inducing_variable.Z, train_inducing)
+    return model
+
+
+class Trainer:
+    """One compiled step: natural gradients for q(u), Adam for the hyperparameters, from a single
+    forward and backward pass (GPflow's two `minimize` calls would need two)."""
+
+    def __init__(self, model, *, learning_rate: float, gamma: float):
+        self.model = model
+        gpflow.set_trainable(model.q_mu, False)
+        gpflow.set_trainable(model.q_sqrt, False)
+        self.gamma = tf.Variable(gamma, dtype=FLOAT, trainable=False)
+        self.natgrad = gpflow.optimizers.NaturalGradient(gamma=self.gamma)
+        self.adam = _L.Adam(learning_rate=learning_rate)
+        spec = [tf.TensorSpec([None, 3], FLOAT), tf.TensorSpec([None, 2], FLOAT)]
+        single_pass = hasattr(self.natgrad, "_natgrad_apply_gradients")  # GPflow 2.9 - 2.11
+        self.step = tf.function(self._step if single_pass else self._two_pass_step,
+                                input_signature=spec)
+        self.elbo = tf.function(lambda X, Y: model.elbo((X, Y)), input_signature=spec)
+
+    def _step(self, X, Y):
+        model = self.model
+        q_vars = [model.q_mu.unconstrained_variable, model.q_sqrt.unconstrained_variable]
+        hypers = list(model.trainable_variables)
+        with tf.GradientTape(watch_accessed_variables=False) as tape:
+            tape.watch(q_vars + hypers)
+            loss = model.training_loss((X, Y))
+        grads = tape.gradient(loss, q_vars + hypers)
+        self.natgrad._natgrad_apply_gradients(grads[0], grads[1], model.q_mu, model.q_sqrt)
+        self.adam.apply_gradients(zip(grads[2:], hypers))
+
+    def _two_pass_step(self, X, Y):
+        loss = self.model.training_loss_closure((X, Y), compile=False)
+        self.natgrad.minimize(loss, [(self.model.q_mu, self.model.q_sqrt)])
+        self.adam.minimize(loss, self.model.trainable_variables)
+
+
+def predict_latent(model, X: np.ndarray, full_cov: bool = False,
+                   chunk: int = 20000) -> Tuple[np.ndarray, np.ndarray]:
+    """Mean and (co)variance of f at the rows of X, in chunks of rows (memory stays small)."""
+    if full_cov:
+        mean, cov = model.predict_f(tf.constant(X, dtype=FLOAT), full_cov=True)
+        return mean.numpy()[:, 0], cov.numpy()[0]
+    means, variances = [], []
+    for start in range(0, max(len(X), 1), chunk):
+        mean, var = model.predict_f(tf.constant(X[start:start + chunk], dtype=FLOAT))
+        means.append(mean.numpy()[:, 0])
+        variances.append(var.numpy()[:, 0])
+    return np.concatenate(means), np.concatenate(variances)
+
+
+def parameter_values(model) -> Dict[str, np.ndarray]:
+    """Every parameter in its unconstrained form (restores bit for bit), and plain variables."""
+    values = {}
+    for path, variable in gpflow.utilities.parameter_dict(model).items():
+        if isinstance(variable, gpflow.Parameter):
+            values[path] = variable.unconstrained_variable.numpy()
+        else:
+            values[path] = variable.numpy()
+    return values
+
+
+def assign_parameter_values(model, values: Dict[str, np.ndarray]) -> None:
+    params = gpflow.utilities.parameter_dict(model)
+    if set(params) != set(values):
+        missing, extra = sorted(set(params) - set(values)), sorted(set(values) - set(params))
+        raise ModelFormatError(f"saved parameters do not fit the model: missing {missing[:3]}, "
+                               f"unexpected {extra[:3]}")
+    for path, variable in params.items():
+        target = variable.unconstrained_variable if isinstance(variable, gpflow.Parameter) \
+            else variable
+        if tuple(target.shape) != tuple(np.shape(values[path])):
+            raise ModelFormatError(f"saved {path} has shape {np.shape(values[path])}, "
+                                   f"the model needs {tuple(target.shape)}")
+        target.assign(values[path])

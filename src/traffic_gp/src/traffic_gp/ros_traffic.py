@@ -1,0 +1,301 @@
+"""ROS side of the crowd model: PeopleCount messages in, predictions and crowd cost maps out."""
+import logging
+import math
+import os
+import queue
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import List, Optional
+
+import numpy as np
+import rospy
+from nav_msgs.msg import OccupancyGrid
+from std_srvs.srv import Trigger, TriggerResponse
+
+from robot_sim.maps import load_map
+from robot_sim.people import CellGrid, hours_of_week, visible_cells
+from robot_sim.ros_maps import grid_to_msg, msg_to_grid
+from traffic_gp.errors import TrafficError
+from traffic_gp.msg import PeopleCount
+from traffic_gp.observations import Observations, aggregate_view
+from traffic_gp.queries import CrowdQueries
+from traffic_gp.srv import PredictCount, PredictCountResponse, PredictRegion, PredictRegionResponse
+
+
+@dataclass
+class ServerConfig:
+    """The node's parameters (defaults here and in config/traffic_gp.yaml)."""
+
+    map_yaml: str = ""
+    cell_size: float = 0.5
+    model_path: str = ""
+    save_on_shutdown: bool = False
+    utc_offset_hours: Optional[float] = None       # None: the machine's local time zone
+    clock: str = "ros"                             # "ros" or "observations"
+    dwell_time: float = 20.0
+    min_rows: int = 2000
+    initial_steps: int = 600
+    train_period: float = 2.0
+    chunk_steps: int = 20
+    publish_period: float = 5.0
+    lookahead_minutes: float = 30.0
+    lookahead_step_minutes: float = 5.0
+    saturation_density: float = 1.0
+    wall_value: int = -1
+    full_resolution: bool = True
+    frame_id: str = "map"
+    model: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_params(cls) -> "ServerConfig":
+        config = cls()
+        for name in cls.__dataclass_fields__:
+            value = rospy.get_param("~" + name, getattr(config, name))
+            if name == "utc_offset_hours":
+                value = None if value in ("", "local", None) else float(value)
+            setattr(config, name, value)
+        if config.clock not in ("ros", "observations"):
+            raise TrafficError(f"~clock must be 'ros' or 'observations', got {config.clock!r}")
+        if config.wall_value not in (-1, 100):
+            raise TrafficError(f"~wall_value must be -1 or 100, got {config.wall_value}")
+        return config
+
+
+class TrafficServer:
+    """Learns where and when people are from PeopleCount messages; serves a crowd cost map.
+
+    Parameters (private; defaults in config/traffic_gp.yaml): map_yaml ("": use the `map`
+    topic), cell_size (0.5 m), model_path ("": start untrained; else load it at start, without
+    training, and save there), save_on_shutdown (false), utc_offset_hours ("": local zone),
+    clock ("ros": now is ROS time; "observations": the newest observation's stamp),
+    dwell_time (20 s), min_rows (2000 rows before a first fit), initial_steps (600),
+    train_period (2 s), chunk_steps (20 training steps per lock hold), publish_period (5 s),
+    lookahead_minutes (30), lookahead_step_minutes (5), saturation_density (1 person/m^2 = 95),
+    wall_value (-1 or 100), full_resolution (true: cost maps at the map's resolution),
+    frame_id ("map"), model (dict of TrafficGP keyword arguments).
+    Topics: subscribes `map` (nav_msgs/OccupancyGrid, when no map_yaml), `people_counts`
+    (traffic_gp/PeopleCount); publishes (latched) `~crowd_costmap` (maximum over now +
+    look-ahead) and `~crowd_costmap_now` (nav_msgs/OccupancyGrid, 0..95, walls wall_value).
+    Services: `~predict_count` (PredictCount), `~predict_region` (PredictRegion),
+    `~save_model` (std_srvs/Trigger).
+    """
+
+    def __init__(self, config: ServerConfig):
+        self.config = config
+        self.cells: Optional[CellGrid] = None
+        self.model = None
+        self.rows_seen = 0
+        self.last_stamp = 0.0
+        self._inbox = queue.Queue()     # PeopleCount messages from the subscriber thread
+        self._pending: List[Observations] = []
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+
+    # ---- set-up -------------------------------------------------------------------------
+    def setup(self) -> None:
+        if self.config.map_yaml:
+            self._set_map(load_map(os.path.expanduser(self.config.map_yaml)))
+        else:
+            rospy.Subscriber("map", OccupancyGrid, lambda msg: self._set_map(msg_to_grid(msg)),
+                             queue_size=1)
+        if self.config.model_path and os.path.exists(self.config.model_path):
+            self._load(self.config.model_path)
+        latch = dict(queue_size=1, latch=True)
+        self.pub_window = rospy.Publisher("~crowd_costmap", OccupancyGrid, **latch)
+        self.pub_now = rospy.Publisher("~crowd_costmap_now", OccupancyGrid, **latch)
+        rospy.Subscriber("people_counts", PeopleCount, self._inbox.put, queue_size=1000)
+        rospy.Service("~predict_count", PredictCount, self._predict_count)
+        rospy.Service("~predict_region", PredictRegion, self._predict_region)
+        rospy.Service("~save_model", Trigger, self._save_service)
+        threading.Thread(target=self._train_loop, name="crowd-training", daemon=True).start()
+        rospy.Timer(rospy.Duration(self.config.publish_period), lambda _: self.publish())
+        rospy.on_shutdown(self.shutdown)
+
+    def _load(self, path: str) -> None:
+        from traffic_gp.model import TrafficGP
+
+        start = time.perf_counter()
+        self.model = TrafficGP.load(path)
+        rospy.loginfo(f"traffic_gp: loaded {path} ({self.model.n_steps_} steps, "
+                      f"{len(self.model.data_)} rows) in {time.perf_counter() - start:.2f} s")
+
+    def _set_map(self, grid) -> None:
+        with self._lock:
+            self.cells = CellGrid.from_map(grid, self.config.cell_size)
+        rospy.loginfo(f"traffic_gp: map {grid.width}x{grid.height}, {self.cells.n_cells} cells "
+                      f"of {self.cells.cell_size:.2f} m")
+
+    # ---- observations and training --------------------------------------------------------
+    def to_rows(self, msg: PeopleCount) -> Observations:
+        """Rows of one message (per seen cell, or one for a total count within a radius)."""
+        stamp = msg.header.stamp.to_sec()
+        hours = float(hours_of_week(stamp, self.config.utc_offset_hours))
+        if msg.cells:
+            if not (len(msg.cells) == len(msg.seen_fraction) == len(msg.counts)):
+                raise TrafficError(f"{len(msg.cells)} cells, {len(msg.seen_fraction)} fractions "
+                                   f"and {len(msg.counts)} counts differ in number")
+            fractions = np.asarray(msg.seen_fraction, float)
+            if np.any((fractions <= 0) | (fractions > 1)):
+                raise TrafficError("seen_fraction must be in (0, 1]")
+            index = self.cells.index_at(np.array([p.x for p in msg.cells]),
+                                        np.array([p.y for p in msg.cells]))
+            ok = index >= 0
+            expo = fractions[ok] * self.cells.cell_area * (1 + msg.duration / self.config.dwell_time)
+            return Observations(self.cells.x[index[ok]], self.cells.y[index[ok]],
+                                np.full(ok.sum(), hours), expo, np.asarray(msg.counts)[ok],
+                                robot=[msg.robot_id] * int(ok.sum()))
+        if not msg.radius > 0:
+            raise TrafficError("a message needs cells or a positive radius")
+        index, fractions = visible_cells(self.cells, msg.robot_position.x, msg.robot_position.y,
+                                         msg.radius)
+        return aggregate_view(self.cells, index, fractions, msg.total_count, hours,
+                              duration=msg.duration, dwell_time=self.config.dwell_time,
+                              robot=msg.robot_id)
+
+    def _drain(self) -> None:
+        while self.cells is not None:
+            try:
+                msg = self._inbox.get_nowait()
+            except queue.Empty:
+                return
+            try:
+                rows = self.to_rows(msg)
+            except (TrafficError, ValueError) as err:
+                rospy.logwarn_throttle(10, f"traffic_gp: dropped a PeopleCount from "
+                                           f"{msg.robot_id!r}: {err}")
+                continue
+            self._pending.append(rows)
+            self.rows_seen += len(rows)
+            self.last_stamp = max(self.last_stamp, msg.header.stamp.to_sec())
+
+    def _train_loop(self) -> None:
+        while not self._stop.wait(self.config.train_period):
+            try:
+                self.train_once()
+            except Exception as err:  # noqa: BLE001 - keep serving; the error is reported
+                rospy.logerr_throttle(30, f"traffic_gp: training failed: "
+                                          f"{type(err).__name__}: {err}")
+
+    def train_once(self) -> None:
+        """Fold pending rows into the model; fit first once `min_rows` rows are there."""
+        self._drain()
+        if not self._pending:
+            return
+        new = Observations.concat(self._pending)
+        if self.model is None and len(new) < self.config.min_rows:
+            return
+        steps = self.config.initial_steps if self.model is None else self.model.online_steps
+        if self.model is None:
+            from traffic_gp.model import TrafficGP
+
+            model = TrafficGP(**self.config.model).fit(new, n_steps=0)   # raises: rows kept
+            with self._lock:
+                self.model = model
+        else:
+            with self._lock:
+                self.model.partial_fit(new, n_steps=0)
+        self._pending = []
+        for done in range(0, steps, self.config.chunk_steps):
+            if self._stop.is_set():
+                return
+            with self._lock:
+                self.model.partial_fit(Observations.empty(),
+                                       n_steps=min(self.config.chunk_steps, steps - done))
+        rospy.loginfo_throttle(30, f"traffic_gp: {len(self.model.data_)} rows, "
+                                   f"{self.model.n_steps_} steps, ELBO {self.model.elbo_[-1]:.0f}")
+
+    # ---- answers --------------------------------------------------------------------------
+    def now_hours(self, stamp=None) -> float:
+        if stamp is not None and not stamp.is_zero():
+            seconds = stamp.to_sec()
+        elif self.config.clock == "observations" and self.last_stamp > 0:
+            seconds = self.last_stamp
+        else:
+            seconds = rospy.Time.now().to_sec()
+        return float(hours_of_week(seconds, self.config.utc_offset_hours))
+
+    def _queries(self) -> CrowdQueries:
+        if self.cells is None:
+            raise TrafficError("no map yet")
+        if self.model is None:
+            raise TrafficError(f"no model yet ({self.rows_seen} observation rows so far, "
+                               f"{self.config.min_rows} needed)")
+        return CrowdQueries(self.model, self.cells)
+
+    def _predict_count(self, req):
+        try:
+            if not (math.isfinite(req.x) and math.isfinite(req.y)):
+                raise TrafficError(f"x and y must be finite, got ({req.x}, {req.y})")
+            with self._lock:
+                est = self._queries().at(req.x, req.y, self.now_hours(req.stamp))
+        except TrafficError as err:
+            return PredictCountResponse(success=False, message=str(err))
+        return PredictCountResponse(True, self._status(), est.expected, est.stddev, est.lower,
+                                    est.upper, est.density, self.cells.cell_size)
+
+    def _predict_region(self, req):
+        polygon = [(p.x, p.y) for p in req.region.points]
+        try:
+            if not all(math.isfinite(v) for point in polygon for v in point):
+                raise TrafficError("region vertices must be finite")
+            with self._lock:
+                est = self._queries().region(polygon, self.now_hours(req.stamp))
+        except TrafficError as err:
+            return PredictRegionResponse(success=False, message=str(err))
+        return PredictRegionResponse(True, self._status(), est.expected, est.stddev, est.lower,
+                                     est.upper, est.cells, est.area)
+
+    def _status(self) -> str:
+        return (f"ok: model of {len(self.model.data_)} rows, {self.model.n_steps_} steps; "
+                f"{self.rows_seen} rows received")
+
+    def publish(self) -> None:
+        if self.model is None or self.cells is None:
+            return
+        c = self.config
+        with self._lock:
+            now_grid, window_grid = self._queries().cost_grid(
+                self.now_hours(), lookahead_hours=c.lookahead_minutes / 60.0,
+                step_hours=c.lookahead_step_minutes / 60.0,
+                saturation_density=c.saturation_density, wall_value=c.wall_value,
+                full_resolution=c.full_resolution)
+            geometry = self.cells.grid if c.full_resolution else self.cells.coarse
+        stamp = rospy.Time.now()
+        for publisher, grid in ((self.pub_now, now_grid), (self.pub_window, window_grid)):
+            msg = grid_to_msg(geometry, c.frame_id, stamp)
+            msg.data = grid.ravel().tolist()
+            publisher.publish(msg)
+
+    def _save_service(self, _req):
+        try:
+            path = self.save()
+        except (TrafficError, OSError) as err:
+            return TriggerResponse(success=False, message=str(err))
+        return TriggerResponse(success=True, message=f"saved {path}")
+
+    def save(self) -> str:
+        if not self.config.model_path:
+            raise TrafficError("~model_path is empty: nowhere to save")
+        if self.model is None:
+            raise TrafficError("no model to save yet")
+        with self._lock:
+            self.model.save(self.config.model_path, meta={"cell_size": self.config.cell_size})
+        return self.config.model_path
+
+    def shutdown(self) -> None:
+        self._stop.set()
+        if self.config.save_on_shutdown and self.model is not None and self.config.model_path:
+            self.save()
+
+
+def route_logging_to_rosout() -> None:
+    """The core's logging (traffic_gp.*) goes to rosout."""
+    class _Rosout(logging.Handler):
+        def emit(self, record):
+            (rospy.logwarn if record.levelno >= logging.WARNING else rospy.loginfo)(
+                self.format(record))
+
+    logger = logging.getLogger("traffic_gp")
+    logger.addHandler(_Rosout())
+    logger.setLevel(logging.INFO)

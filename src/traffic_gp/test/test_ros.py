@@ -1,0 +1,111 @@
+"""The ROS nodes through roslaunch: observations in, services and crowd cost maps out."""
+import math
+
+import numpy as np
+import pytest
+
+from robot_sim import OCCUPIED, generate_building, save_map
+from robot_sim.people import PeopleSimulator
+from ros_harness import wait_until
+from traffic_gp.model import TrafficGP
+from traffic_gp.observations import Observations
+from traffic_gp.persistence import read_header
+
+pytestmark = pytest.mark.ros
+NODE = "/traffic_gp"
+
+
+def services(rospy):
+    from traffic_gp.srv import PredictCount, PredictRegion
+
+    return (rospy.ServiceProxy(f"{NODE}/predict_count", PredictCount),
+            rospy.ServiceProxy(f"{NODE}/predict_region", PredictRegion))
+
+
+def rows_received(message: str) -> int:
+    return int(message.split(";")[1].split()[0])
+
+
+def test_learns_from_simulated_robots_and_serves_a_crowd_costmap(roslaunch, rospy_node, tmp_path):
+    import rospy
+    from geometry_msgs.msg import Point, Point32
+    from nav_msgs.msg import OccupancyGrid
+    from std_srvs.srv import Trigger
+
+    from traffic_gp.msg import PeopleCount
+
+    model_path = tmp_path / "crowd.npz"
+    launch = roslaunch("traffic_gp", "crowd_sim.launch", seed=0, time_scale=600, rate=10,
+                       min_rows=1500, initial_steps=10, publish_period=1.0,
+                       model_path=str(model_path))
+    launch.wait_for_services([f"{NODE}/predict_count", f"{NODE}/predict_region"], timeout=90)
+    count, region = services(rospy)
+    answer = wait_until(lambda: count(10.0, 6.5, rospy.Time(0)).success, 150,
+                        what="a first fit from the simulated robots")
+    first = count(10.0, 6.5, rospy.Time(0))
+    assert answer and first.expected_count >= 0 and first.lower <= first.upper
+    assert first.cell_size == pytest.approx(0.5) and rows_received(first.message) >= 1500
+
+    grid = rospy.wait_for_message("/map", OccupancyGrid, 30)
+    crowd = rospy.wait_for_message(f"{NODE}/crowd_costmap", OccupancyGrid, 30)
+    assert (crowd.info.width, crowd.info.height) == (grid.info.width, grid.info.height)
+    assert crowd.info.resolution == pytest.approx(grid.info.resolution)
+    assert crowd.header.frame_id == "map"
+    walls = np.asarray(grid.data) == OCCUPIED
+    values = np.asarray(crowd.data)
+    assert np.all(values[walls] == -1)
+    assert np.all((values[~walls] >= 0) & (values[~walls] <= 95))
+    assert values[~walls].max() > 0
+
+    whole = region(None, rospy.Time(0))
+    assert whole.success and whole.cells > 100
+    assert whole.area == pytest.approx(whole.cells * 0.25, rel=1e-6)
+    assert whole.lower <= whole.expected_count <= whole.upper
+
+    # bad requests: clear answers, the node keeps working
+    wall = count(0.05, 0.05, rospy.Time(0))
+    assert not wall.success and "not in a free cell" in wall.message
+    assert not count(math.nan, 1.0, rospy.Time(0)).success
+    from geometry_msgs.msg import Polygon
+    two = region(Polygon([Point32(1, 1, 0), Point32(2, 2, 0)]), rospy.Time(0))
+    assert not two.success and "3 vertices" in two.message
+    bad = PeopleCount(robot_id="broken", cells=[Point(10.0, 6.5, 0)], seen_fraction=[1.0, 1.0],
+                      counts=[1])
+    publisher = rospy.Publisher("/people_counts", PeopleCount, queue_size=1)
+    wait_until(lambda: publisher.get_num_connections() > 0, 10, what="a subscriber")
+    publisher.publish(bad)
+    wait_until(lambda: "dropped a PeopleCount from 'broken'" in launch.log_tail(400), 30,
+               what="the malformed message to be reported")
+    later = wait_until(lambda: count(10.0, 6.5, rospy.Time(0)), 30, what="an answer")
+    assert later.success and rows_received(later.message) > rows_received(first.message)
+
+    saved = rospy.ServiceProxy(f"{NODE}/save_model", Trigger)()
+    assert saved.success and model_path.exists()
+    assert read_header(model_path)["n_rows"] > 0
+
+
+@pytest.fixture
+def saved_model(tmp_path):
+    """A tiny model trained here on simulated counts, and the building's map file."""
+    building = generate_building(0)
+    sim = PeopleSimulator.from_building(building, 0.5, seed=2)
+    obs = Observations.from_views(sim.cells, sim.observe(300, start=48.0, hours=24.0))
+    model = TrafficGP(n_inducing=30, n_steps=20, batch_size=256).fit(obs)
+    return model, model.save(tmp_path / "model.npz"), save_map(building.grid, tmp_path / "map.yaml")
+
+
+def test_a_saved_model_is_served_as_saved_without_training(roslaunch, rospy_node, saved_model):
+    import rospy
+
+    from traffic_gp.ros_people import sim_stamp
+
+    model, model_path, map_yaml = saved_model
+    roslaunch("traffic_gp", "traffic_gp.launch", map_yaml=str(map_yaml), model_path=str(model_path),
+              utc_offset_hours=0).wait_for_services([f"{NODE}/predict_count"], timeout=90)
+    count, _ = services(rospy)
+    hours = 48 + 10 + 50 / 60.0
+    answer = wait_until(lambda: count(10.1, 6.6, sim_stamp(hours, 0.0)), 60, what="an answer")
+    assert answer.success and "20 steps" in answer.message, answer.message
+    # the cell holding (10.1, 6.6) has its centre at (10.25, 6.75)
+    expected = model.predict(10.25, 6.75, hours, 0.25)[0]
+    assert answer.expected_count == pytest.approx(expected, rel=1e-9)
