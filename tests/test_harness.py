@@ -66,8 +66,8 @@ def test_single_node_with_private_params(roslaunch, rospy_node):
 
 @pytest.mark.ros
 def test_waiting_on_a_node_that_dies_reports_its_log(roscore, tmp_path):
-    broken = RosLaunch.node("robot_sim", "map_publisher", master_uri=roscore.uri,
-                            log_dir=tmp_path, env=roscore.env(),
+    broken = RosLaunch.node("robot_sim", "map_publisher", name="broken_map_publisher",
+                            master_uri=roscore.uri, log_dir=tmp_path, env=roscore.env(),
                             params={"map_yaml": str(tmp_path / "missing.yaml")})
     broken.start()
     try:

@@ -123,8 +123,9 @@ class DemoRecorderNode:
         self.recording.publish(Bool(False))
         self.count += 1
         msg = ros_demos.to_msg(demo, rospy.Time.now())
-        self.demos.publish(msg)
-        return TriggerResponse(*self.persist(msg, raw, demo.meta.get("model_error", 0.0)))
+        ok, message = self.persist(msg, raw, demo.meta.get("model_error", 0.0))
+        self.demos.publish(msg)     # after persisting: a listener may load it right away
+        return TriggerResponse(ok, message)
 
     def persist(self, msg, raw, model_error):
         """Bag first, then the database; a failure of one keeps the other and says so."""

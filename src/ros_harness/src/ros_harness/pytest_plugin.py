@@ -17,11 +17,13 @@ Markers: `ros` (needs roscore), `db` (needs a database server), `rviz`, `slow`.
 """
 import os
 import uuid
+import xmlrpc.client
 from pathlib import Path
 from typing import List
 
 import pytest
 
+from ros_harness.errors import HarnessError
 from ros_harness.processes import (
     ManagedProcess,
     MongoWireServer,
@@ -89,6 +91,7 @@ class Launcher:
         self.core = core
         self.log_dir = log_dir
         self.launched: List[RosLaunch] = []
+        self.params_before = set(_param_names(core.uri))
 
     def __call__(self, package_or_path: str, launch_file: str = "", **args) -> RosLaunch:
         target = [package_or_path, launch_file] if launch_file else [package_or_path]
@@ -104,8 +107,20 @@ class Launcher:
         return launch.start()
 
     def stop_all(self) -> None:
+        """Stop every launch, then delete the parameters they set: the master outlives the test,
+        and a node started later under the same name must not read this test's private params."""
         for launch in reversed(self.launched):
             launch.stop()
+        master = xmlrpc.client.ServerProxy(self.core.uri)
+        for name in set(_param_names(self.core.uri)) - self.params_before:
+            master.deleteParam("/pytest_launcher", name)
+
+
+def _param_names(master_uri: str) -> List[str]:
+    code, message, names = xmlrpc.client.ServerProxy(master_uri).getParamNames("/pytest_launcher")
+    if code != 1:
+        raise HarnessError(f"cannot list parameters of {master_uri}: {message}")
+    return names
 
 
 @pytest.fixture
