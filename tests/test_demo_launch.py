@@ -33,12 +33,12 @@ def stack(roslaunch, couchdb_url, workspace_root, tmp_path):
 
 def test_demo_launch_brings_up_the_whole_stack_and_each_part_works(stack, rospy_node, couchdb_url):
     import rospy
-    from igmm_layers.srv import LocateObjects, RecommendRegion
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import Joy
-    from traffic_gp.srv import PredictCount
 
+    from igmm_layers.srv import LocateObjects, RecommendRegion
     from ros_mongo import open_store
+    from traffic_gp.srv import PredictCount
 
     # 1. the recorder stores the simulated robot's odometry in the database
     with open_store(couchdb_url) as store:

@@ -148,9 +148,11 @@ def run(demo) -> None:
 
     scenario = load_scenario("static_obstacle")
     out = demo.output / "lfd"
+    session = f"demo_{time.strftime('%Y%m%d_%H%M%S')}"   # learn from this run's demos only
     launch = demo.launch("lfd_controller", "teleop_record.launch", scenario="static_obstacle", seed=5,
                          time_scale=2.0, bag_dir=str(out / "bags"), db_url=demo.db_url,
-                         source="synthetic_expert", scale_linear=0.9, scale_angular=3.0, **FRAMES)
+                         source="synthetic_expert", session_id=session, scale_linear=0.9,
+                         scale_angular=3.0, **FRAMES)
     launch.wait_for_services([NS + "/demo_recorder/start", NS + "/unicycle_sim/reset"], timeout=60)
     launch.wait_for_subscribers([NS + "/joy"], timeout=30)
     joy = rospy.Publisher(NS + "/joy", Joy, queue_size=20)
@@ -160,7 +162,7 @@ def run(demo) -> None:
     print(f"  recording {DEMOS} demonstrations of {STEPS} steps through Joy -> joy_teleop -> "
           f"unicycle_sim -> demo_recorder (bags + CouchDB)", flush=True)
     record_demos(demo, scenario, joy, watch, reset)
-    summary = learn_from_sources([], demo.db_url, scenario="static_obstacle",
+    summary = learn_from_sources([], demo.db_url, scenario="static_obstacle", session_id=session,
                                  output=str(out / "reward.yaml"), plots=str(out))
     print("  " + summary.replace("\n", "\n  "), flush=True)
     learned, truth = load_reward(out / "reward.yaml").weights, true_reward().weights

@@ -91,10 +91,12 @@ def test_teleop_needs_the_dead_man_button_and_scales_axes(rospy_node, roslaunch)
 
 def test_recording_by_joystick_buttons_stores_the_demo_in_a_bag_and_the_database(
         rospy_node, roslaunch, couchdb_url, tmp_path):
+    from lfd_controller.errors import DemonstrationError
     from lfd_controller.learning import load_sources
 
     launch = roslaunch("lfd_controller", "teleop_record.launch", scenario="static_obstacle",
-                       time_scale=2.0, bag_dir=str(tmp_path / "bags"), db_url=couchdb_url)
+                       time_scale=2.0, bag_dir=str(tmp_path / "bags"), db_url=couchdb_url,
+                       session_id="morning_session")
     launch.wait_for_services(["/demo_recorder/start", "/demo_recorder/stop"])
     launch.wait_for_subscribers(["/joy", "/odom", "/cmd_vel_applied"])
     recording = Collector("/demo_recorder/recording", Bool)
@@ -118,6 +120,9 @@ def test_recording_by_joystick_buttons_stores_the_demo_in_a_bag_and_the_database
     assert len(bags) == 1
     from_bag, from_db = load_sources([str(tmp_path / "bags")]), load_sources([], couchdb_url)
     assert len(from_bag) == len(from_db) == 1
+    assert len(load_sources([], couchdb_url, session_id="morning_session")) == 1
+    with pytest.raises(DemonstrationError, match="no demonstrations found"):
+        load_sources([], couchdb_url, session_id="another_session")
     demo = from_bag[0]
     np.testing.assert_allclose(demo.actions, from_db[0].actions)
     assert demo.scenario.name == "static_obstacle" and demo.length >= 20

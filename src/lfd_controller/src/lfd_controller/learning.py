@@ -50,7 +50,9 @@ def load_reward(path):
     return reward_from_dict(data)
 
 
-def load_sources(bags: Sequence[str], db_url: str = "", scenario: str = "") -> List[Demonstration]:
+def load_sources(bags: Sequence[str], db_url: str = "", scenario: str = "",
+                 session_id: str = "") -> List[Demonstration]:
+    """Demonstrations from bag files/folders and the database (of one session, if given)."""
     from lfd_controller import ros_demos
 
     demos = ros_demos.read_bags(bags) if bags else []
@@ -59,7 +61,8 @@ def load_sources(bags: Sequence[str], db_url: str = "", scenario: str = "") -> L
 
         try:
             with open_store(db_url) as store:
-                demos += ros_demos.load_demos(store, scenario=scenario or None)
+                demos += ros_demos.load_demos(store, scenario=scenario or None,
+                                              session_id=session_id or None)
         except StoreError as err:
             raise DemonstrationError(f"cannot load demonstrations from {db_url}: {err}") from err
     if scenario:
@@ -70,12 +73,12 @@ def load_sources(bags: Sequence[str], db_url: str = "", scenario: str = "") -> L
     return demos
 
 
-def learn_from_sources(bags, db_url: str = "", *, scenario: str = "", kind: str = "linear",
-                       output: str, store_db: bool = False, plots: str = "", seed: int = 0,
-                       trim_steps: Optional[int] = 10) -> str:
+def learn_from_sources(bags, db_url: str = "", *, scenario: str = "", session_id: str = "",
+                       kind: str = "linear", output: str, store_db: bool = False, plots: str = "",
+                       seed: int = 0, trim_steps: Optional[int] = 10) -> str:
     """Load, learn, save (and plot); demos are cut `trim_steps` after first reaching the goal
     (None: uncut), so idling after a drive does not count as demonstrated behaviour."""
-    demos = load_sources(bags, db_url, scenario)
+    demos = load_sources(bags, db_url, scenario, session_id)
     if trim_steps is not None:
         demos = [trim_to_goal(d, trim_steps) for d in demos]
     started = time.monotonic()

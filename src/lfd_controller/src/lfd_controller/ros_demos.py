@@ -76,7 +76,9 @@ def store_demo(store, msg: DemonstrationMsg, *, session_id: Optional[str] = None
 
 
 def load_demos(store, *, scenario: Optional[str] = None, source: Optional[str] = None,
-               limit: Optional[int] = None) -> List[Demonstration]:
+               session_id: Optional[str] = None, limit: Optional[int] = None) -> List[Demonstration]:
+    """Stored demonstrations, oldest first, optionally of one scenario, source and session."""
     tags = ["demonstration"] + [tag for tag in (scenario, source) if tag]
     return [from_msg(stored.message())
-            for stored in store.find_messages(topic=DEMO_TOPIC, tags=tags, limit=limit)]
+            for stored in store.find_messages(topic=DEMO_TOPIC, tags=tags,
+                                              session_id=session_id or None, limit=limit)]

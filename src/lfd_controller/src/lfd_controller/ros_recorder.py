@@ -26,6 +26,8 @@ class DemoRecorderNode:
       ~bag_dir (str, "$ROS_HOME/lfd_demos"): one bag per demonstration ("" = no bags).
       ~db_url (str, ""): ros_mongo store URL (CouchDB or mongodb://...; "" = no database).
       ~source (str, "joystick"): who demonstrates (stored with the demo, used as a tag).
+      ~session_id (str, ""): stored with each demo in the database, so learning can take one
+      session's demos only ("" = none).
       ~min_steps (int, 5), ~use_applied_cmd (bool, true): pair odom with the simulator's
       cmd_vel_applied and sim_time by stamp (exact); false: odom with the latest cmd_vel (robot).
     Topics in: odom, cmd_vel_applied (geometry_msgs/TwistStamped), sim_time
@@ -43,6 +45,7 @@ class DemoRecorderNode:
         self.bag_dir = Path(bag_dir).expanduser() if bag_dir else None
         self.db_url = rospy.get_param("~db_url", "")
         self.source = rospy.get_param("~source", "joystick")
+        self.session_id = rospy.get_param("~session_id", "") or None
         self.scenario, self.raw, self.count = None, [], 0
         self.latest_cmd, self.first_stamp = (0.0, 0.0), None
         self.demos = rospy.Publisher("~demonstrations", DemonstrationMsg, queue_size=5, latch=True)
@@ -143,7 +146,8 @@ class DemoRecorderNode:
 
             try:
                 with open_store(self.db_url) as store:
-                    parts.append(f"database id {ros_demos.store_demo(store, msg)}")
+                    stored_id = ros_demos.store_demo(store, msg, session_id=self.session_id)
+                    parts.append(f"database id {stored_id}")
             except StoreError as err:
                 ok = False
                 parts.append(f"database NOT written: {err}")
