@@ -132,7 +132,8 @@ def dimension_scaling(k: int, n: int, repeats: int, quick: bool):
     exponents = {key: slope([r["dim"] for r in big], [r[key] for r in big])
                  for key in ("fast_us", "inverse_us")}
     added = slope([r["dim"] for r in big], [r["fast_us"] - rows[0]["fast_us"] for r in big])
-    print(f"  time ~ D^b over D = 8..32: fast b = {exponents['fast_us']:.2f} (b = {added:.2f} for the "
+    above = "n/a, within the noise" if np.isnan(added) else f"{added:.2f}"
+    print(f"  time ~ D^b over D = 8..32: fast b = {exponents['fast_us']:.2f} (b = {above} for the "
           f"time above D = 2's fixed cost), inverse each update b = {exponents['inverse_us']:.2f}; "
           f"time(32)/time(16): fast {rows[-1]['fast_us'] / rows[-2]['fast_us']:.2f}, "
           f"inverse {rows[-1]['inverse_us'] / rows[-2]['inverse_us']:.2f} (D^2: 4, D^3: 8)")
@@ -140,7 +141,10 @@ def dimension_scaling(k: int, n: int, repeats: int, quick: bool):
 
 
 def slope(dims, micros):
-    """Exponent b of micros ~ D^b (least squares in log-log)."""
+    """Exponent b of micros ~ D^b (least squares in log-log); nan when a time is not positive
+    (the time above D = 2's cost can be within the noise at small K)."""
+    if min(micros) <= 0:
+        return float("nan")
     return float(np.polyfit(np.log(dims), np.log(micros), 1)[0])
 
 

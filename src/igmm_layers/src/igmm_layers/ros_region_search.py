@@ -3,7 +3,6 @@
 The cores (embeddings, embeddings_training, recommender) know nothing of ROS; this module turns
 parameters into their options, requests into calls and results into responses.
 """
-import logging
 import threading
 from dataclasses import fields
 from pathlib import Path
@@ -29,25 +28,16 @@ from igmm_layers.srv import (
     RecommendRegion,
     RecommendRegionResponse,
 )
+from ros_mongo import ros_common
 
 __all__ = ["EmbeddingServer", "RegionRecommenderNode", "EmbeddingClient", "route_logging",
            "backend_config_from_params"]
 METHODS = ("auto", "phrase", "word")
 
 
-class _RosHandler(logging.Handler):
-    def emit(self, record):
-        level = {logging.DEBUG: rospy.logdebug, logging.INFO: rospy.loginfo,
-                 logging.WARNING: rospy.logwarn}.get(record.levelno, rospy.logerr)
-        level(self.format(record))
-
-
 def route_logging() -> None:
     """Send the cores' `logging` records (logger "igmm_layers") to rosout, once."""
-    logger = logging.getLogger("igmm_layers")
-    if not any(isinstance(h, _RosHandler) for h in logger.handlers):
-        logger.addHandler(_RosHandler())
-        logger.setLevel(logging.INFO)
+    ros_common.route_logging("igmm_layers")
 
 
 def backend_config_from_params() -> BackendConfig:

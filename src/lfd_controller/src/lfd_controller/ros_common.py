@@ -1,9 +1,7 @@
 """Shared ROS helpers of lfd_controller's nodes."""
-import logging
-
-import rospy
 
 from robot_sim.maps import quaternion_to_yaw
+from ros_mongo import ros_common
 
 
 def odom_state(msg):
@@ -14,24 +12,9 @@ def odom_state(msg):
             twist.linear.x, twist.angular.z]
 
 
-class RosoutHandler(logging.Handler):
-    """Routes the core's logging to rosout (installed once per node)."""
-
-    def emit(self, record):
-        text = self.format(record)
-        if record.levelno >= logging.ERROR:
-            rospy.logerr(text)
-        elif record.levelno >= logging.WARNING:
-            rospy.logwarn(text)
-        else:
-            rospy.loginfo(text)
-
-
 def route_logging() -> None:
-    logger = logging.getLogger("lfd_controller")
-    if not any(isinstance(h, RosoutHandler) for h in logger.handlers):
-        logger.addHandler(RosoutHandler())
-        logger.setLevel(logging.INFO)
+    """lfd_controller's logging on rosout."""
+    ros_common.route_logging("lfd_controller")
 
 
 def single_threaded_blas() -> None:

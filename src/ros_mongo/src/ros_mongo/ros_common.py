@@ -1,4 +1,7 @@
-"""What the ros_mongo nodes share: private parameters with defaults, and the core's logging on rosout."""
+"""What the ros_mongo nodes share: private parameters with defaults, and the core's logging on rosout.
+
+`route_logging` serves every package of the workspace (igmm_layers, traffic_gp, lfd_controller
+import it from here)."""
 import logging
 import os
 from pathlib import Path
@@ -26,9 +29,9 @@ class _RospyHandler(logging.Handler):
             rospy.logdebug(text)
 
 
-def route_logging() -> None:
-    """Send the ros_mongo core's log records to rosout (once)."""
-    logger = logging.getLogger("ros_mongo")
+def route_logging(logger_name: str = "ros_mongo") -> None:
+    """Send the log records of a pure-Python core (logger `logger_name`) to rosout (once)."""
+    logger = logging.getLogger(logger_name)
     if not any(isinstance(h, _RospyHandler) for h in logger.handlers):
         logger.addHandler(_RospyHandler())
         logger.setLevel(logging.INFO)

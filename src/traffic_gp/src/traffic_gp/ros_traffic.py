@@ -1,5 +1,4 @@
 """ROS side of the crowd model: PeopleCount messages in, predictions and crowd cost maps out."""
-import logging
 import math
 import os
 import queue
@@ -291,11 +290,6 @@ class TrafficServer:
 
 def route_logging_to_rosout() -> None:
     """The core's logging (traffic_gp.*) goes to rosout."""
-    class _Rosout(logging.Handler):
-        def emit(self, record):
-            (rospy.logwarn if record.levelno >= logging.WARNING else rospy.loginfo)(
-                self.format(record))
+    from ros_mongo.ros_common import route_logging
 
-    logger = logging.getLogger("traffic_gp")
-    logger.addHandler(_Rosout())
-    logger.setLevel(logging.INFO)
+    route_logging("traffic_gp")
