@@ -149,8 +149,10 @@ def run(demo) -> None:
     scenario = load_scenario("static_obstacle")
     out = demo.output / "lfd"
     session = f"demo_{time.strftime('%Y%m%d_%H%M%S')}"   # learn from this run's demos only
+    # Recording runs in real time, as with a person at the joystick: the scripted teleoperator
+    # answers each simulator step, and on a busy machine 2x left it too little time to keep up.
     launch = demo.launch("lfd_controller", "teleop_record.launch", scenario="static_obstacle", seed=5,
-                         time_scale=2.0, bag_dir=str(out / "bags"), db_url=demo.db_url,
+                         time_scale=1.0, bag_dir=str(out / "bags"), db_url=demo.db_url,
                          source="synthetic_expert", session_id=session, scale_linear=0.9,
                          scale_angular=3.0, **FRAMES)
     launch.wait_for_services([NS + "/demo_recorder/start", NS + "/unicycle_sim/reset"], timeout=60)

@@ -134,3 +134,57 @@ def test_the_weekly_model_tells_days_apart_and_the_daily_one_repeats(small_world
     a_week_later = weekly.model_.kernel(here, here + [0, 0, 168.0]).numpy()[0, 0]
     a_day_later = weekly.model_.kernel(here, here + [0, 0, 24.0]).numpy()[0, 0]
     assert a_week_later == pytest.approx(prior) and a_day_later < 0.95 * prior
+
+
+@pytest.mark.parametrize("layout", ["space x day + space x hour x day", "space x day",
+                                    "with the weekly terms"])
+def test_numpy_posterior_of_a_saved_model_predicts_what_gpflow_predicts(small_world, fitted, layout,
+                                                                        tmp_path):
+    """The snapshot re-implements the SVGP's predictions in NumPy; GPflow is the reference."""
+    from traffic_gp.posterior import PosteriorSnapshot
+
+    sim, obs = small_world
+    model = {"space x day + space x hour x day": fitted,
+             "space x day": TrafficGP(n_inducing=30, hourly=False, n_steps=40, batch_size=512),
+             "with the weekly terms": TrafficGP(n_inducing=30, weekly=True, n_steps=40,
+                                                batch_size=512)}[layout]
+    if not hasattr(model, "model_"):
+        model.fit(obs)
+    snapshot = PosteriorSnapshot.load(model.save(tmp_path / "crowd.npz"))
+    rng = np.random.default_rng(1)
+    x, y, t = sim.cells.x, sim.cells.y, rng.uniform(0, 168, sim.cells.n_cells)
+    reference, ours = model.predict_latent(x, y, t), snapshot.predict_latent(x, y, t)
+    np.testing.assert_allclose(ours[0], reference[0], rtol=1e-6, atol=1e-8)
+    np.testing.assert_allclose(ours[1], reference[1], rtol=1e-5, atol=1e-8)
+    some = slice(0, 40)
+    np.testing.assert_allclose(snapshot.sample_totals(x[some], y[some], t[some], 0.25, 200),
+                               model.sample_totals(x[some], y[some], t[some], 0.25, 200), rtol=1e-4)
+    assert snapshot.n_steps_ == model.n_steps_ and snapshot.period == model.period
+
+
+def test_a_saved_model_loads_and_predicts_without_tensorflow(fitted, tmp_path):
+    import subprocess
+    import sys
+
+    path = fitted.save(tmp_path / "crowd.npz")
+    expected = fitted.predict(1.5, 1.5, 14.0)[0]
+    code = ("import sys, time; start = time.perf_counter()\n"
+            "from traffic_gp.posterior import PosteriorSnapshot\n"
+            f"value = PosteriorSnapshot.load({str(path)!r}).predict(1.5, 1.5, 14.0)[0]\n"
+            "print(value, 'tensorflow' in sys.modules, time.perf_counter() - start)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    value, tensorflow_imported, _seconds = out.stdout.split()
+    assert tensorflow_imported == "False"
+    assert float(value) == pytest.approx(expected, rel=1e-6)
+
+
+def test_a_damaged_parameter_set_is_a_clear_error(fitted, tmp_path):
+    from traffic_gp.persistence import PARAM_PREFIX
+    from traffic_gp.posterior import PosteriorSnapshot
+
+    path = fitted.save(tmp_path / "crowd.npz")
+    with np.load(path) as archive:
+        arrays = {k: archive[k] for k in archive.files if k != PARAM_PREFIX + ".q_sqrt"}
+    np.savez(tmp_path / "damaged.npz", **arrays)
+    with pytest.raises(ModelFormatError, match="unexpected saved parameters"):
+        PosteriorSnapshot.load(tmp_path / "damaged.npz")

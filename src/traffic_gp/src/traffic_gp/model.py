@@ -10,14 +10,14 @@ rows added to the data. TensorFlow is imported on first use.
 """
 import logging
 import time
-from typing import Optional, Tuple
+from typing import Optional
 
 import numpy as np
 
 from robot_sim.people import HOURS_PER_WEEK
-from traffic_gp import predictive
 from traffic_gp.errors import ConfigError, NotFittedError
 from traffic_gp.observations import Observations
+from traffic_gp.posterior import LatentPredictions
 
 log = logging.getLogger(__name__)
 
@@ -28,7 +28,7 @@ WARMUP_STEPS = 100
 ANNEAL_SHARE = 0.4
 
 
-class TrafficGP:
+class TrafficGP(LatentPredictions):
     """sklearn-style estimator of people density; fitted attributes end in `_`.
 
     Args:
@@ -163,51 +163,19 @@ class TrafficGP:
         self._trainer.gamma.assign(self.natgrad_gamma * warm * anneal)
         self._trainer.adam.learning_rate.assign(self.learning_rate * anneal)
 
-    # ---- prediction -----------------------------------------------------------------------
-    def _inputs(self, x, y, t) -> np.ndarray:
-        if not hasattr(self, "model_"):
-            raise NotFittedError("TrafficGP is not fitted yet: call fit() or load a model")
-        x, y, t = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (x, y, t)))
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y)) and np.all(np.isfinite(t))):
-            raise ConfigError("prediction inputs must be finite numbers")
-        return np.column_stack([x.ravel(), y.ravel(), np.mod(t.ravel(), self.period)])
+    # ---- prediction (the rest of the predictions: posterior.LatentPredictions) -------------
+    def _fitted(self) -> bool:
+        return hasattr(self, "model_")
 
-    def predict_latent(self, x, y, t) -> Tuple[np.ndarray, np.ndarray]:
-        """Mean and variance of the log density at places (x, y) and times t (hours of week)."""
+    @property
+    def n_rows_(self) -> int:
+        """Training rows the model holds."""
+        return len(self.data_)
+
+    def _latent(self, inputs: np.ndarray, full_cov: bool = False):
         from traffic_gp import gp_parts
 
-        inputs = self._inputs(x, y, t)
-        return gp_parts.predict_latent(self.model_, inputs)
-
-    def predict(self, x, y, t, exposure=1.0) -> np.ndarray:
-        """Expected people counts (density for exposure 1 m^2)."""
-        mean, var = self.predict_latent(x, y, t)
-        return np.asarray(exposure) * predictive.expected_value(mean, var)
-
-    def predict_std(self, x, y, t, exposure=1.0) -> np.ndarray:
-        """Uncertainty (standard deviation) of the expected count."""
-        mean, var = self.predict_latent(x, y, t)
-        return np.asarray(exposure) * predictive.expected_std(mean, var)
-
-    def predict_interval(self, x, y, t, exposure=1.0, level: float = 0.9):
-        """Central `level` predictive interval of the count itself (model + Poisson noise)."""
-        mean, var = self.predict_latent(x, y, t)
-        return predictive.interval(level, mean, var, exposure)
-
-    def sample_totals(self, x, y, t, exposure, n_samples: int = 500) -> np.ndarray:
-        """Samples of the summed expected count over many cells at one time (joint posterior)."""
-        from traffic_gp import gp_parts
-
-        mean, cov = gp_parts.predict_latent(self.model_, self._inputs(x, y, t), full_cov=True)
-        chol = np.linalg.cholesky(cov + 1e-8 * np.eye(cov.shape[0]))
-        rng = np.random.default_rng(self.random_state)
-        f = mean[None, :] + rng.standard_normal((n_samples, mean.size)) @ chol.T
-        return np.exp(f) @ np.broadcast_to(np.asarray(exposure, float), mean.shape)
-
-    def score(self, obs: Observations) -> float:
-        """Mean held-out log predictive density of the counts (higher is better)."""
-        mean, var = self.predict_latent(obs.x, obs.y, obs.t)
-        return float(np.mean(predictive.log_density(obs.count, mean, var, obs.exposure)))
+        return gp_parts.predict_latent(self.model_, inputs, full_cov=full_cov)
 
     # ---- persistence ----------------------------------------------------------------------
     def save(self, path, *, include_data: bool = True, meta: Optional[dict] = None):

@@ -2,6 +2,7 @@
 import math
 import os
 import queue
+import shutil
 import threading
 import time
 from dataclasses import dataclass, field
@@ -16,8 +17,10 @@ from robot_sim.maps import load_map
 from robot_sim.people import CellGrid, hours_of_week, visible_cells
 from robot_sim.ros_maps import grid_to_msg, msg_to_grid
 from traffic_gp.errors import TrafficError
+from traffic_gp.model import TrafficGP
 from traffic_gp.msg import PeopleCount
 from traffic_gp.observations import Observations, aggregate_view
+from traffic_gp.posterior import PosteriorSnapshot
 from traffic_gp.queries import CrowdQueries
 from traffic_gp.srv import PredictCount, PredictCountResponse, PredictRegion, PredictRegionResponse
 
@@ -112,12 +115,12 @@ class TrafficServer:
         rospy.on_shutdown(self.shutdown)
 
     def _load(self, path: str) -> None:
-        from traffic_gp.model import TrafficGP
-
+        """Serve the saved model's posterior at once (NumPy, no TensorFlow); the trainable model
+        is loaded by the training thread when new observations arrive."""
         start = time.perf_counter()
-        self.model = TrafficGP.load(path)
+        self.model = PosteriorSnapshot.load(path)
         rospy.loginfo(f"traffic_gp: loaded {path} ({self.model.n_steps_} steps, "
-                      f"{len(self.model.data_)} rows) in {time.perf_counter() - start:.2f} s")
+                      f"{self.model.n_rows_} rows) in {time.perf_counter() - start:.2f} s")
 
     def _set_map(self, grid) -> None:
         with self._lock:
@@ -184,10 +187,12 @@ class TrafficServer:
         new = Observations.concat(self._pending)
         if self.model is None and len(new) < self.config.min_rows:
             return
+        if isinstance(self.model, PosteriorSnapshot):     # first new rows after loading a file
+            trainable = TrafficGP.load(self.model.path)
+            with self._lock:
+                self.model = trainable
         steps = self.config.initial_steps if self.model is None else self.model.online_steps
         if self.model is None:
-            from traffic_gp.model import TrafficGP
-
             model = TrafficGP(**self.config.model).fit(new, n_steps=0)   # raises: rows kept
             with self._lock:
                 self.model = model
@@ -201,7 +206,7 @@ class TrafficServer:
             with self._lock:
                 self.model.partial_fit(Observations.empty(),
                                        n_steps=min(self.config.chunk_steps, steps - done))
-        rospy.loginfo_throttle(30, f"traffic_gp: {len(self.model.data_)} rows, "
+        rospy.loginfo_throttle(30, f"traffic_gp: {self.model.n_rows_} rows, "
                                    f"{self.model.n_steps_} steps, ELBO {self.model.elbo_[-1]:.0f}")
 
     # ---- answers --------------------------------------------------------------------------
@@ -246,7 +251,7 @@ class TrafficServer:
                                      est.upper, est.cells, est.area)
 
     def _status(self) -> str:
-        return (f"ok: model of {len(self.model.data_)} rows, {self.model.n_steps_} steps; "
+        return (f"ok: model of {self.model.n_rows_} rows, {self.model.n_steps_} steps; "
                 f"{self.rows_seen} rows received")
 
     def publish(self) -> None:
@@ -279,7 +284,11 @@ class TrafficServer:
         if self.model is None:
             raise TrafficError("no model to save yet")
         with self._lock:
-            self.model.save(self.config.model_path, meta={"cell_size": self.config.cell_size})
+            if isinstance(self.model, PosteriorSnapshot):   # nothing learnt since it was loaded
+                if os.path.abspath(self.model.path) != os.path.abspath(self.config.model_path):
+                    shutil.copyfile(self.model.path, self.config.model_path)
+            else:
+                self.model.save(self.config.model_path, meta={"cell_size": self.config.cell_size})
         return self.config.model_path
 
     def shutdown(self) -> None:

@@ -1,0 +1,186 @@
+"""Predictions from a crowd model in NumPy, and a saved model's posterior without TensorFlow.
+
+Importing TensorFlow and GPflow takes several seconds, and a node that loads a saved model only to
+answer queries needs neither. `PosteriorSnapshot.load(path)` reads the parameters a `TrafficGP`
+saved (persistence.py), maps them to their constrained values as GPflow does (softplus for the
+positive ones, TensorFlow Probability's fill_triangular for q_sqrt) and predicts the latent log
+density as the whitened SVGP's `predict_f` does. `LatentPredictions` holds the predictions both
+`TrafficGP` and the snapshot derive from the latent Gaussian.
+"""
+import re
+from typing import Dict, List, Tuple
+
+import numpy as np
+
+from robot_sim.people import HOURS_PER_WEEK
+from traffic_gp import predictive
+from traffic_gp.errors import ConfigError, ModelFormatError, NotFittedError
+
+JITTER = 1e-6          # GPflow's default jitter on K(Z, Z)
+CHUNK = 20000          # prediction rows per block (memory stays small)
+
+
+class LatentPredictions:
+    """Predictions from the Gaussian over the log density f(x, y, t); subclasses provide
+    `_latent(inputs, full_cov)`, `_fitted()`, `period` and `random_state`."""
+
+    def _inputs(self, x, y, t) -> np.ndarray:
+        if not self._fitted():
+            raise NotFittedError(f"{type(self).__name__} is not fitted yet: call fit() or load a model")
+        x, y, t = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (x, y, t)))
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y)) and np.all(np.isfinite(t))):
+            raise ConfigError("prediction inputs must be finite numbers")
+        return np.column_stack([x.ravel(), y.ravel(), np.mod(t.ravel(), self.period)])
+
+    def predict_latent(self, x, y, t) -> Tuple[np.ndarray, np.ndarray]:
+        """Mean and variance of the log density at places (x, y) and times t (hours of week)."""
+        return self._latent(self._inputs(x, y, t), full_cov=False)
+
+    def predict(self, x, y, t, exposure=1.0) -> np.ndarray:
+        """Expected people counts (density for exposure 1 m^2)."""
+        mean, var = self.predict_latent(x, y, t)
+        return np.asarray(exposure) * predictive.expected_value(mean, var)
+
+    def predict_std(self, x, y, t, exposure=1.0) -> np.ndarray:
+        """Uncertainty (standard deviation) of the expected count."""
+        mean, var = self.predict_latent(x, y, t)
+        return np.asarray(exposure) * predictive.expected_std(mean, var)
+
+    def predict_interval(self, x, y, t, exposure=1.0, level: float = 0.9):
+        """Central `level` predictive interval of the count itself (model + Poisson noise)."""
+        mean, var = self.predict_latent(x, y, t)
+        return predictive.interval(level, mean, var, exposure)
+
+    def sample_totals(self, x, y, t, exposure, n_samples: int = 500) -> np.ndarray:
+        """Samples of the summed expected count over many cells at one time (joint posterior)."""
+        mean, cov = self._latent(self._inputs(x, y, t), full_cov=True)
+        chol = np.linalg.cholesky(cov + 1e-8 * np.eye(cov.shape[0]))
+        rng = np.random.default_rng(self.random_state)
+        f = mean[None, :] + rng.standard_normal((n_samples, mean.size)) @ chol.T
+        return np.exp(f) @ np.broadcast_to(np.asarray(exposure, float), mean.shape)
+
+    def score(self, obs) -> float:
+        """Mean held-out log predictive density of the counts (higher is better)."""
+        mean, var = self.predict_latent(obs.x, obs.y, obs.t)
+        return float(np.mean(predictive.log_density(obs.count, mean, var, obs.exposure)))
+
+
+def softplus(x: np.ndarray) -> np.ndarray:
+    return np.logaddexp(0.0, x)
+
+
+def fill_triangular(vector: np.ndarray) -> np.ndarray:
+    """Lower-triangular n x n matrix from its n(n+1)/2 entries, in the order of
+    tfp.math.fill_triangular (GPflow's bijector for q_sqrt)."""
+    m = vector.shape[-1]
+    n = int(np.sqrt(0.25 + 2.0 * m) - 0.5)
+    if n * (n + 1) // 2 != m:
+        raise ModelFormatError(f"q_sqrt has {m} entries, not a triangular number")
+    tail = vector[..., m - (n * n - m):]
+    full = np.concatenate([tail, vector[..., ::-1]], axis=-1).reshape(vector.shape[:-1] + (n, n))
+    return np.tril(full)
+
+
+class _Factor:
+    """One factor of a product kernel: squared exponential over x, y or periodic over t."""
+
+    def __init__(self, variance: float, lengthscales: np.ndarray, period: float = 0.0):
+        self.variance, self.lengthscales, self.period = variance, np.atleast_1d(lengthscales), period
+
+    def matrix(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        if self.period:        # GPflow Periodic(SquaredExponential) on the time column
+            r = np.pi * (a[:, 2, None] - b[None, :, 2]) / self.period
+            return self.variance * np.exp(-0.5 * (np.sin(r) / self.lengthscales[0]) ** 2)
+        sq = sum(((a[:, d, None] - b[None, :, d]) / self.lengthscales[d]) ** 2 for d in (0, 1))
+        return self.variance * np.exp(-0.5 * sq)
+
+
+class PosteriorSnapshot(LatentPredictions):
+    """A saved TrafficGP's posterior, predicting in NumPy; loads in a fraction of a second.
+
+    It answers every prediction a fitted TrafficGP answers (the same numbers, to rounding); to
+    train further, load the file as a TrafficGP (which imports TensorFlow).
+    """
+
+    def __init__(self, header: dict, values: Dict[str, np.ndarray], path: str = ""):
+        params = header["params"]
+        self.path, self.header = path, header
+        self.weekly = bool(params.get("weekly", False))
+        self.random_state = params.get("random_state", 0)
+        self.n_steps_, self.n_rows_ = header.get("n_steps", 0), header.get("n_rows", 0)
+        try:
+            self.terms = _kernel_terms(values)
+            self.constant = float(values[".mean_function.c"].ravel()[0])
+            self.inducing = np.asarray(values[".inducing_variable.Z"], float)
+            q_mu = np.asarray(values[".q_mu"], float)[:, 0]
+            q_sqrt = fill_triangular(np.asarray(values[".q_sqrt"], float))[0]
+        except (KeyError, IndexError, ValueError) as err:
+            raise ModelFormatError(f"{path or 'model'}: unexpected saved parameters ({err})") from err
+        kuu = self._kernel(self.inducing, self.inducing) + JITTER * np.eye(len(self.inducing))
+        chol = np.linalg.cholesky(kuu)
+        inv_chol_t = np.linalg.inv(chol).T                 # L^-T
+        self._mean_weights = inv_chol_t @ q_mu              # mean = Kzx^T L^-T q_mu
+        self._var_form = inv_chol_t @ (q_sqrt @ q_sqrt.T - np.eye(len(q_mu))) @ inv_chol_t.T
+
+    @classmethod
+    def load(cls, path) -> "PosteriorSnapshot":
+        """The posterior of a model file written by `TrafficGP.save` (no TensorFlow)."""
+        from traffic_gp.persistence import PARAM_PREFIX, _header, _open
+
+        with _open(path) as archive:
+            header = _header(archive, path)
+            values = {key[len(PARAM_PREFIX):]: archive[key] for key in archive.files
+                      if key.startswith(PARAM_PREFIX)}
+        return cls(header, values, str(path))
+
+    @property
+    def period(self) -> float:
+        return HOURS_PER_WEEK if self.weekly else 24.0
+
+    def _fitted(self) -> bool:
+        return True
+
+    def _kernel(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        total = np.zeros((len(a), len(b)))
+        for factors in self.terms:
+            product = np.ones_like(total)
+            for factor in factors:
+                product *= factor.matrix(a, b)
+            total += product
+        return total
+
+    def _latent(self, inputs: np.ndarray, full_cov: bool = False):
+        if full_cov:
+            kzx = self._kernel(self.inducing, inputs)
+            cov = self._kernel(inputs, inputs) + kzx.T @ self._var_form @ kzx
+            return self.constant + kzx.T @ self._mean_weights, cov
+        prior_var = sum(np.prod([f.variance for f in factors]) for factors in self.terms)
+        means, variances = [], []
+        for start in range(0, max(len(inputs), 1), CHUNK):
+            kzx = self._kernel(self.inducing, inputs[start:start + CHUNK])
+            means.append(self.constant + kzx.T @ self._mean_weights)
+            variances.append(prior_var + np.einsum("ij,ij->j", kzx, self._var_form @ kzx))
+        return np.concatenate(means), np.maximum(np.concatenate(variances), 1e-12)
+
+
+def _kernel_terms(values: Dict[str, np.ndarray]) -> List[List[_Factor]]:
+    """The sum-of-products kernel (see gp_parts.build_kernel) from the saved parameter paths."""
+    pattern = re.compile(r"^\.kernel((?:\.kernels\[\d+\])*)\.(base_kernel\.)?(variance|lengthscales|period)$")
+    factors: Dict[Tuple[int, ...], Dict[str, float]] = {}
+    for path, value in values.items():
+        found = pattern.match(path)
+        if found:
+            index = tuple(int(i) for i in re.findall(r"\[(\d+)\]", found.group(1)))
+            factors.setdefault(index, {})[found.group(3)] = softplus(np.asarray(value, float))
+    if not factors:
+        raise KeyError("kernel parameters")
+    depth = max(len(index) for index in factors)
+    terms: Dict[Tuple[int, ...], List[_Factor]] = {}
+    for index in sorted(factors):
+        if len(index) != depth:
+            raise KeyError(f"kernel layout {sorted(factors)}")
+        parts = factors[index]
+        factor = _Factor(float(parts["variance"]), parts["lengthscales"],
+                         float(parts["period"]) if "period" in parts else 0.0)
+        terms.setdefault(index[:-1] if depth == 2 else (), []).append(factor)
+    return [terms[key] for key in sorted(terms)]
