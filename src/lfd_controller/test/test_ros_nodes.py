@@ -9,6 +9,7 @@ from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Joy
 from std_msgs.msg import Bool, String
+from std_srvs.srv import Trigger
 
 from ros_harness import wait_until
 
@@ -134,6 +135,50 @@ def test_recording_by_joystick_buttons_stores_the_demo_in_a_bag_and_the_database
     np.testing.assert_allclose(np.median(driving, axis=0), expected, atol=1e-9)
     np.testing.assert_allclose(demo.rollout(), demo.states, atol=1e-9)
     for item in (recording, demos, odom):
+        item.close()
+
+
+def test_robot_mode_pairs_odometry_with_the_latest_cmd_vel(rospy_node, roslaunch, tmp_path):
+    """On a robot there is no cmd_vel_applied/sim_time: the recorder pairs each odometry message
+    with the newest cmd_vel. The simulator stands in for the robot; its exact record is the truth."""
+    from lfd_controller.learning import load_sources
+
+    launch = roslaunch("lfd_controller", "teleop_record.launch", scenario="static_obstacle",
+                       bag_dir=str(tmp_path / "bags"), use_applied_cmd=False)
+    launch.wait_for_services(["/demo_recorder/start", "/demo_recorder/stop"])
+    launch.wait_for_subscribers(["/joy", "/odom", "/cmd_vel"])
+    demos = Collector("/demo_recorder/demonstrations", rospy.AnyMsg)
+    odom = Collector("/odom", Odometry)
+    joy = rospy.Publisher("/joy", Joy, queue_size=10)
+    wait_until(lambda: joy.get_num_connections() > 0, 10, what="joy_teleop to connect")
+    start, stop = rospy.ServiceProxy("/demo_recorder/start", Trigger), \
+        rospy.ServiceProxy("/demo_recorder/stop", Trigger)
+    assert start().success
+    recorded_from = len(odom.messages())
+    drive, lb = [0.3, 0.6, 0, 0, 0, 0, 0, 0], [0, 0, 0, 0, 1] + [0] * 6
+
+    def enough_steps():      # weave: turn left, then right, every 10 steps
+        steps = len(odom.messages()) - recorded_from
+        joy.publish(_joy([drive[0] * (1 if steps // 10 % 2 == 0 else -1)] + drive[1:], lb))
+        return steps >= 30
+    wait_until(enough_steps, 30, what="30 robot steps while driving")
+    joy.publish(_joy([0.0] * 8, [0] * 11))
+    answer = stop()
+    assert answer.success, answer.message
+    wait_until(lambda: demos.messages(), 15, what="the recorded demonstration")
+    demo = load_sources([str(tmp_path / "bags")])[0]
+    assert demo.length >= 25
+    driving = demo.actions[np.abs(demo.actions[:, 0]) > 0]
+    expected = [0.5 * (0.6 - 0.05) / 0.95, 1.5 * (0.3 - 0.05) / 0.95]
+    np.testing.assert_allclose(np.median(driving[:, 0]), expected[0], atol=1e-6)
+    np.testing.assert_allclose(np.sort(np.unique(np.round(driving[:, 1], 6)))[[0, -1]],
+                               [-expected[1], expected[1]], atol=1e-6)
+    # pairing by arrival is approximate: the model's replay of the commands stays near the path
+    model_error = np.abs(demo.rollout()[:, :2] - demo.states[:, :2]).max()
+    assert model_error < 0.25, (model_error, answer.message)
+    moved = np.hypot(*(demo.states[-1, :2] - demo.states[0, :2]))
+    assert moved > 0.5
+    for item in (demos, odom):
         item.close()
 
 
