@@ -25,8 +25,6 @@ from ros_mongo.store import META_KEYS, MessageStore, message_doc, topic_doc
 __all__ = ["CouchStore", "MAX_DOC_BYTES"]
 
 MAX_DOC_BYTES = 8_000_000
-_BATCH_BYTES = 24 * 1024 * 1024
-_BATCH_DOCS = 1000
 _INDEXES = {"ros_mongo_topic_time": ["topic", "receive_time"], "ros_mongo_time": ["receive_time"]}
 _DB_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789_$()+-/")
 
@@ -35,6 +33,7 @@ class CouchStore(MessageStore):
     """Messages in a CouchDB database (URL http(s)://[user:pass@]host:port/dbname)."""
 
     backend = "couchdb"
+    backend_title = "CouchDB"
 
     def __init__(self, url: str, *, timeout: float = 30.0, page_size: int = 200, **options):
         super().__init__(url, **options)
@@ -88,23 +87,9 @@ class CouchStore(MessageStore):
         self.session.close()
 
     # -- writing -----------------------------------------------------------------------------
-    def _insert(self, records: List[MessageRecord]) -> int:
-        stored, errors, batch, size = 0, [], [], 0
-        for record in records:
-            body = self._encode(record)
-            if batch and (size + len(body) > _BATCH_BYTES or len(batch) >= _BATCH_DOCS):
-                stored += self._bulk(batch, errors)
-                batch, size = [], 0
-            batch.append(body)
-            size += len(body)
-        if batch:
-            stored += self._bulk(batch, errors)
-        if errors:
-            error = StoreError(f"CouchDB rejected {len(errors)} of {len(records)} documents, "
-                               f"first: {errors[0]}")
-            error.rejected = len(errors)
-            raise error
-        return stored
+    def _batch_item(self, record: MessageRecord) -> Tuple[bytes, int]:
+        body = self._encode(record)
+        return body, len(body)
 
     def _encode(self, record: MessageRecord) -> bytes:
         doc = message_doc(record)
@@ -124,7 +109,7 @@ class CouchStore(MessageStore):
                              b'"data":"', raw64, b'"}}}'))
         return body
 
-    def _bulk(self, bodies: List[bytes], errors: list) -> int:
+    def _write_batch(self, bodies: List[bytes], errors: list) -> int:
         payload = b"".join((b'{"docs":[', b",".join(bodies), b"]}"))
         response = self._request("POST", "/_bulk_docs", data=payload,
                                  headers={"Content-Type": "application/json"})

@@ -23,8 +23,6 @@ from ros_mongo.store import MessageStore, message_doc, topic_doc
 __all__ = ["MongoStore", "MAX_BSON_BYTES"]
 
 MAX_BSON_BYTES = 16 * 1024 * 1024 - 64 * 1024
-_BATCH_DOCS = 1000
-_BATCH_BYTES = 32 * 1024 * 1024
 _DUPLICATE_KEY = 11000
 T = TypeVar("T")
 
@@ -33,6 +31,8 @@ class MongoStore(MessageStore):
     """Messages in a MongoDB database (URL mongodb://[user:pass@]host:port/dbname[?options])."""
 
     backend = "mongodb"
+    backend_title = "MongoDB"
+    batch_bytes = 32 * 1024 * 1024
 
     def __init__(self, url: str, *, timeout: float = 10.0, **options):
         super().__init__(url, **options)
@@ -77,23 +77,9 @@ class MongoStore(MessageStore):
         self.client.close()
 
     # -- writing -----------------------------------------------------------------------------
-    def _insert(self, records: List[MessageRecord]) -> int:
-        stored, errors, batch, size = 0, [], [], 0
-        for record in records:
-            doc = self._document(record)
-            if batch and (len(batch) >= _BATCH_DOCS or size + len(record.raw) > _BATCH_BYTES):
-                stored += self._insert_batch(batch, errors)
-                batch, size = [], 0
-            batch.append(doc)
-            size += len(record.raw) if "raw" in doc else 0
-        if batch:
-            stored += self._insert_batch(batch, errors)
-        if errors:
-            error = StoreError(f"MongoDB rejected {len(errors)} of {len(records)} documents, "
-                               f"first: {errors[0]}")
-            error.rejected = len(errors)
-            raise error
-        return stored
+    def _batch_item(self, record: MessageRecord) -> Tuple[dict, int]:
+        doc = self._document(record)
+        return doc, len(record.raw) if "raw" in doc else 0
 
     def _document(self, record: MessageRecord) -> dict:
         doc = message_doc(record)
@@ -114,7 +100,7 @@ class MongoStore(MessageStore):
             self.blobs.upload_from_stream_with_id(message_id, message_id, raw)
         self._call("store message bytes in GridFS", put)
 
-    def _insert_batch(self, docs: List[dict], errors: list) -> int:
+    def _write_batch(self, docs: List[dict], errors: list) -> int:
         def insert() -> int:
             try:
                 return len(self.messages.insert_many(docs, ordered=False).inserted_ids)

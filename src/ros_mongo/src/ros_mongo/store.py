@@ -47,6 +47,9 @@ class MessageStore:
     """
 
     backend = "none"
+    backend_title = "the database"      # in error messages
+    batch_docs = 1000                   # documents per batched write, at most
+    batch_bytes = 24 * 1024 * 1024      # bytes per batched write, about
 
     def __init__(self, url: str, *, blob_threshold: int = BLOB_THRESHOLD,
                  max_array_len: int = msgtypes.MAX_ARRAY_LEN):
@@ -175,6 +178,31 @@ class MessageStore:
         raise NotImplementedError
 
     def _insert(self, records: List[MessageRecord]) -> int:
+        """Write records in batches of at most `batch_docs` documents and about `batch_bytes`;
+        a batch's rejected documents are collected and reported together after the others."""
+        stored, errors, batch, size = 0, [], [], 0
+        for record in records:
+            item, weight = self._batch_item(record)
+            if batch and (len(batch) >= self.batch_docs or size + weight > self.batch_bytes):
+                stored += self._write_batch(batch, errors)
+                batch, size = [], 0
+            batch.append(item)
+            size += weight
+        if batch:
+            stored += self._write_batch(batch, errors)
+        if errors:
+            error = StoreError(f"{self.backend_title} rejected {len(errors)} of {len(records)} "
+                               f"documents, first: {errors[0]}")
+            error.rejected = len(errors)
+            raise error
+        return stored
+
+    def _batch_item(self, record: MessageRecord) -> Tuple[object, int]:
+        """What a batch holds for `record`, and how many bytes it adds to the batch."""
+        raise NotImplementedError
+
+    def _write_batch(self, batch: list, errors: list) -> int:
+        """Write one batch; append rejected documents' reasons to `errors`; return newly stored."""
         raise NotImplementedError
 
     def _put_topic_doc(self, info: TopicInfo) -> None:
