@@ -8,10 +8,6 @@ from igmm_layers.corpora import WordNet, brown_sentences, file_fingerprint, find
 from igmm_layers.embeddings_errors import CorpusError, EmbeddingError
 from igmm_layers.errors import IGMMError
 
-WORDNET = Path("/usr/share/wordnet")
-needs_wordnet = pytest.mark.skipif(not (WORDNET / "data.noun").is_file(),
-                                   reason="Debian's wordnet-base is not installed (scripts/setup.sh)")
-
 CA01 = ("\n\n\tThe/at Fulton/np-tl County/nn-tl Grand/jj-tl Jury/nn-tl said/vbd Friday/nr ./.\n\n"
         "\n\tThe/at jury/nn further/rbr said/vbd in/in term-end/nn presentments/nns ./.\n")
 CA02 = "\n\n\tRoom/nn 321/cd of/in Towne's/np$ lab/nn ,/, 1/2/cd of/in it/pps ./.\n"
@@ -73,7 +69,7 @@ def test_fingerprint_changes_with_content(tmp_path):
     assert file_fingerprint([a]) != first
 
 
-@needs_wordnet
+@pytest.mark.wordnet
 def test_wordnet_synsets_morphy_and_glosses_match_wordnet_3():
     wordnet = WordNet()
     fountain = wordnet.synsets("water_fountain")[0]
@@ -87,7 +83,7 @@ def test_wordnet_synsets_morphy_and_glosses_match_wordnet_3():
     assert "print" in derived
 
 
-@needs_wordnet
+@pytest.mark.wordnet
 def test_wordnet_gloss_corpus_has_one_sentence_per_synset():
     # WordNet 3.0 has 117,659 synsets (82,115 nouns, 13,767 verbs, 18,156 adjectives, 3,621 adverbs).
     assert sum(1 for _ in WordNet().gloss_sentences()) == 117_659

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from gensim.models import KeyedVectors
 
+from igmm_layers.corpora import DEFAULT_WORDNET_DIR
 from igmm_layers.embeddings import WordEmbeddings, phrase_tokens
 from igmm_layers.embeddings_errors import EmbeddingError, EmptyPhraseError, ModelError
 from igmm_layers.embeddings_training import (
@@ -20,9 +21,7 @@ from igmm_layers.embeddings_training import (
     train_word2vec,
 )
 
-WORDNET = Path("/usr/share/wordnet")
-needs_wordnet = pytest.mark.skipif(not (WORDNET / "data.noun").is_file(),
-                                   reason="Debian's wordnet-base is not installed (scripts/setup.sh)")
+WORDNET = Path(DEFAULT_WORDNET_DIR)
 
 # A hand-made vector space with known answers (unit axes: drink, paper, motion, body).
 SPACE = {

@@ -3,7 +3,6 @@ recommender on it, and the choice of backend with its fallback to word2vec (no R
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,9 +15,6 @@ from igmm_layers.recommender import Region
 from igmm_layers.recommender_phrase import PhraseRegionRecommender
 from robot_sim.building import generate_building
 
-WORDNET = Path("/usr/share/wordnet")
-needs_wordnet = pytest.mark.skipif(not (WORDNET / "data.noun").is_file(),
-                                   reason="Debian's wordnet-base is not installed (scripts/setup.sh)")
 # A tiny word2vec text file (the fallback's model): axes drink, motion.
 VECTORS = "4 2\nwater 1 0\nfountain 0.9 0.1\nelevator 0 1\nlift 0.1 0.9\n"
 
@@ -86,7 +82,7 @@ def test_similarity_ranks_candidates_by_meaning(sentence):
             assert candidates[int(np.argmax(scores))] == best, (method, phrase, scores)
 
 
-@needs_wordnet
+@pytest.mark.wordnet
 def test_phrase_recommender_finds_the_generated_buildings_places(sentence, building_regions):
     recommender = PhraseRegionRecommender(sentence.embed_phrases, wordnet=WordNet())
     recommender.set_regions(building_regions)
@@ -109,7 +105,7 @@ def test_phrase_recommender_finds_the_generated_buildings_places(sentence, build
         recommender.recommend(" . ")
 
 
-@needs_wordnet
+@pytest.mark.wordnet
 def test_numbers_as_text_only_confuse_rooms_that_differ_by_number(sentence, building_regions):
     """Why the number rule exists: without it, "classroom 101" is not reliably classroom_101."""
     plain = PhraseRegionRecommender(sentence.embed_phrases, wordnet=WordNet(), number_weight=0.0)

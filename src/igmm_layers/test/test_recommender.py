@@ -1,7 +1,6 @@
 """Region recommender core: label files, WordNet label expansion, ranking on a hand-made vector
 space with known answers, spelling similarity (no ROS)."""
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,10 +18,6 @@ from igmm_layers.text_similarity import (
     tokenize,
 )
 from robot_sim.building import generate_building
-
-WORDNET = Path("/usr/share/wordnet")
-needs_wordnet = pytest.mark.skipif(not (WORDNET / "data.noun").is_file(),
-                                   reason="Debian's wordnet-base is not installed (scripts/setup.sh)")
 
 # Axes: drink, paper, motion, body, people. Each label word points along its meaning.
 SPACE = {"coffee": [1, 0, 0, 0, 0], "cafe": [0.9, 0.1, 0, 0, 0], "print": [0, 1, 0, 0, 0],
@@ -132,7 +127,7 @@ def test_duplicate_labels_at_several_places_are_all_returned(embed):
     assert names == [("cafe", 0), ("cafe", 5), ("elevator", 1)]
 
 
-@needs_wordnet
+@pytest.mark.wordnet
 def test_wordnet_expansion_adds_synonyms_related_words_and_definitions():
     expander = LabelExpander(WordNet())
     fountain = expander.expand("water_fountain")
@@ -145,7 +140,7 @@ def test_wordnet_expansion_adds_synonyms_related_words_and_definitions():
     assert set(expander.expand("towne_321")) == {"towne", "321"}  # nothing to expand
 
 
-@needs_wordnet
+@pytest.mark.wordnet
 def test_wordnet_synonyms_find_labels_the_vectors_alone_miss(embed):
     plain = RegionRecommender(embed)
     expanded = RegionRecommender(embed, wordnet=WordNet())
