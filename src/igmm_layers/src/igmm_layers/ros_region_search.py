@@ -28,16 +28,10 @@ from igmm_layers.srv import (
     RecommendRegion,
     RecommendRegionResponse,
 )
-from ros_mongo import ros_common
 
-__all__ = ["EmbeddingServer", "RegionRecommenderNode", "EmbeddingClient", "route_logging",
+__all__ = ["EmbeddingServer", "RegionRecommenderNode", "EmbeddingClient",
            "backend_config_from_params"]
 METHODS = ("auto", "phrase", "word")
-
-
-def route_logging() -> None:
-    """Send the cores' `logging` records (logger "igmm_layers") to rosout, once."""
-    ros_common.route_logging("igmm_layers")
 
 
 def backend_config_from_params() -> BackendConfig:

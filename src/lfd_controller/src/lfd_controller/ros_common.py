@@ -1,7 +1,6 @@
 """Shared ROS helpers of lfd_controller's nodes."""
 
 from robot_sim.maps import quaternion_to_yaw
-from ros_mongo import ros_common
 
 
 def odom_state(msg):
@@ -10,11 +9,6 @@ def odom_state(msg):
     q = pose.orientation
     return [pose.position.x, pose.position.y, quaternion_to_yaw(q.x, q.y, q.z, q.w),
             twist.linear.x, twist.angular.z]
-
-
-def route_logging() -> None:
-    """lfd_controller's logging on rosout."""
-    ros_common.route_logging("lfd_controller")
 
 
 def single_threaded_blas() -> None:

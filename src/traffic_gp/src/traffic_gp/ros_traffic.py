@@ -296,9 +296,3 @@ class TrafficServer:
         if self.config.save_on_shutdown and self.model is not None and self.config.model_path:
             self.save()
 
-
-def route_logging_to_rosout() -> None:
-    """The core's logging (traffic_gp.*) goes to rosout."""
-    from ros_mongo.ros_common import route_logging
-
-    route_logging("traffic_gp")
