@@ -52,18 +52,25 @@ def read_header(path) -> dict:
         return _header(archive, path)
 
 
-def load_model(path):
-    """A `TrafficGP` with the saved parameters; nothing is trained."""
-    from traffic_gp import gp_parts
-    from traffic_gp.model import TrafficGP
-
+def read_parameters(path, *, with_data: bool = False):
+    """(header, GP parameters in unconstrained form by path, training rows) of a saved model, read
+    with NumPy only; the rows are None unless `with_data` and the file holds them."""
     with _open(path) as archive:
         header = _header(archive, path)
         values = {key[len(PARAM_PREFIX):]: archive[key] for key in archive.files
                   if key.startswith(PARAM_PREFIX)}
         data = None
-        if all(DATA_PREFIX + name in archive.files for name in FIELDS):
+        if with_data and all(DATA_PREFIX + name in archive.files for name in FIELDS):
             data = Observations(*(archive[DATA_PREFIX + name] for name in FIELDS))
+    return header, values, data
+
+
+def load_model(path):
+    """A `TrafficGP` with the saved parameters; nothing is trained."""
+    from traffic_gp import gp_parts
+    from traffic_gp.model import TrafficGP
+
+    header, values, data = read_parameters(path, with_data=True)
     try:
         estimator = TrafficGP(**header["params"])
         inducing = values[".inducing_variable.Z"]

@@ -125,12 +125,9 @@ class PosteriorSnapshot(LatentPredictions):
     @classmethod
     def load(cls, path) -> "PosteriorSnapshot":
         """The posterior of a model file written by `TrafficGP.save` (no TensorFlow)."""
-        from traffic_gp.persistence import PARAM_PREFIX, _header, _open
+        from traffic_gp.persistence import read_parameters
 
-        with _open(path) as archive:
-            header = _header(archive, path)
-            values = {key[len(PARAM_PREFIX):]: archive[key] for key in archive.files
-                      if key.startswith(PARAM_PREFIX)}
+        header, values, _ = read_parameters(path)
         return cls(header, values, str(path))
 
     @property
