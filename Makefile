@@ -22,7 +22,7 @@ setup:
 	@bash scripts/setup.sh
 
 demo: setup
-	@scripts/in_env.sh python scripts/demo.py $(DEMO_ARGS)
+	@scripts/in_env.sh python -m robot_demo $(DEMO_ARGS)
 
 test: setup
 	@scripts/in_env.sh bash scripts/run_tests.sh $(TEST_ARGS)

@@ -27,7 +27,7 @@ import numpy as np
 from tqdm import tqdm
 
 from igmm_layers import LayerParams
-from igmm_layers.metrics import match_scores, ospa
+from igmm_layers.sim.metrics import match_scores, ospa
 from robot_sim.detections import random_scene, simulate_detections
 
 OUT_DIR = Path(__file__).resolve().parent.parent / "artifacts" / "bench"

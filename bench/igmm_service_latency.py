@@ -19,8 +19,23 @@ import time
 from pathlib import Path
 
 import numpy as np
+import rospy
 import yaml
+from geometry_msgs.msg import Point
 
+from igmm_layers.msg import ClusterSet, ObjectCluster
+from igmm_layers.ros_convert import apply_cluster_set
+from igmm_layers.ros_layer_server import LayerServer
+from igmm_layers.ros_services import LayerServices
+from igmm_layers.server_config import ServerConfig
+from igmm_layers.srv import (
+    AlternateObject,
+    CountObjects,
+    LayerInfo,
+    LocateObjects,
+    LookupObject,
+    ObjectPairLikelihood,
+)
 from ros_harness import RosCore, RosLaunch, wait_until
 
 OUT_DIR = Path(__file__).resolve().parent.parent / "artifacts" / "bench"
@@ -29,10 +44,6 @@ REGION = "bench"
 
 
 def cluster_set(n_clusters: int, n_classes: int, seed: int = 0):
-    import rospy
-
-    from igmm_layers.msg import ClusterSet, ObjectCluster
-
     rng = np.random.default_rng(seed)
     msg = ClusterSet(layers=[f"{REGION}/objects"])
     msg.header.stamp = rospy.Time.now()
@@ -51,16 +62,6 @@ def cluster_set(n_clusters: int, n_classes: int, seed: int = 0):
 
 def requests(n_classes: int, calls: int, seed: int = 1):
     """(service, srv type, list of request kwargs) with random arguments."""
-    import rospy
-    from geometry_msgs.msg import Point
-
-    from igmm_layers.srv import (
-        AlternateObject,
-        CountObjects,
-        LocateObjects,
-        LookupObject,
-        ObjectPairLikelihood,
-    )
 
     rng = np.random.default_rng(seed)
 
@@ -116,11 +117,6 @@ def timed(call, kwargs_list):
 
 def in_process(msg, plan):
     """The same handlers without ROS transport: a LayerServer that is never set up."""
-    from igmm_layers.ros_convert import apply_cluster_set
-    from igmm_layers.ros_layer_server import LayerServer
-    from igmm_layers.ros_services import LayerServices
-    from igmm_layers.server_config import ServerConfig
-
     server = LayerServer(ServerConfig.from_params(yaml.safe_load(CONFIG.read_text())))
     apply_cluster_set(server.layers, msg)
     services = LayerServices(server)
@@ -156,11 +152,6 @@ def main() -> int:
 
 
 def run(core, tmp: Path, args, calls: int) -> int:
-    import rospy
-
-    from igmm_layers.msg import ClusterSet
-    from igmm_layers.srv import LayerInfo
-
     rospy.init_node("igmm_latency_bench", anonymous=True, disable_signals=True)
     params = yaml.safe_load(CONFIG.read_text())
     server = RosLaunch.node("igmm_layers", "igmm_layers", name="igmm_layers", master_uri=core.uri,

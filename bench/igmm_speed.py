@@ -4,7 +4,7 @@ cost growth with the dimension D up to 32 (O(K D^2) per update from rank-one upd
 
     python bench/igmm_speed.py [--quick] [--repeats N]
 
-Peers from the same run: the slow literal reference (igmm_layers.reference: inverse and
+Peers from the same run: the slow literal reference (igmm_layers.sim.reference: inverse and
 determinant recomputed for every component and update, O(K D^3)), and the same vectorised update
 with the precisions recomputed by np.linalg.inv / slogdet each update (O(K D^3), batched LAPACK).
 The stream: K well-separated objects (10 m apart) seen with 0.1 m noise, after a warm-up that
@@ -23,7 +23,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from igmm_layers import IncrementalGMM
-from igmm_layers.reference import ReferenceIGMM
+from igmm_layers.sim.reference import ReferenceIGMM
 
 OUT_DIR = Path(__file__).resolve().parent.parent / "artifacts" / "bench"
 TARGET_UPDATES_PER_S = 50000

@@ -62,14 +62,14 @@ def percentile(values: Sequence[float], q: float) -> float:
 
 
 def fresh_process_load_seconds(**config) -> dict:
-    """Load an embedding backend (igmm_layers.embeddings_backends.BackendConfig(**config)) in a
+    """Load an embedding backend (region_search.backends.BackendConfig(**config)) in a
     new Python process, imports included, and embed one phrase: what a node's start-up costs.
     Returns {"seconds": total, "load_seconds": the loader's own time, "backend": served, "note"}."""
     import subprocess
     import sys
 
     code = ("import json, sys, time; t = time.monotonic();"
-            "from igmm_layers.embeddings_backends import BackendConfig, load_backend;"
+            "from region_search.backends import BackendConfig, load_backend;"
             "b = load_backend(BackendConfig(**json.loads(sys.argv[1])));"
             "b.embeddings.embed_phrases(['water fountain']);"
             "print(json.dumps({'seconds': time.monotonic() - t, 'load_seconds': b.load_seconds,"

@@ -32,13 +32,13 @@ from pathlib import Path
 
 from nlp_common import BROWN_ZIP, OUT_DIR, evaluate, fresh_process_load_seconds, load_eval, write_json
 
-from igmm_layers.corpora import WordNet
-from igmm_layers.embeddings import WordEmbeddings
-from igmm_layers.embeddings_sentence import load_sentence_model
-from igmm_layers.embeddings_training import Word2VecParams, load_embeddings
-from igmm_layers.recommender import Region, RegionRecommender
-from igmm_layers.recommender_phrase import PhraseRegionRecommender
-from igmm_layers.text_similarity import content_words, string_baseline_score, tokenize
+from region_search.corpora import WordNet
+from region_search.embeddings import WordEmbeddings
+from region_search.phrase import PhraseRegionRecommender
+from region_search.recommender import Region, RegionRecommender
+from region_search.sentence import load_sentence_model
+from region_search.text_similarity import content_words, string_baseline_score, tokenize
+from region_search.training import Word2VecParams, load_embeddings
 
 PRODUCT = "sentence expanded/phrase"
 FALLBACK = "brown+wordnet expanded/align+spelling+hubness"

@@ -25,16 +25,18 @@ import tempfile
 import time
 from pathlib import Path
 
+import rospy
 import yaml
 from nlp_common import BROWN_ZIP, OUT_DIR, ROOT, fresh_process_load_seconds, load_eval, percentile, write_json
 
-from igmm_layers.corpora import WordNet
-from igmm_layers.embeddings_backends import BackendConfig, load_backend
-from igmm_layers.recommender import Region, RegionRecommender
-from igmm_layers.recommender_phrase import PhraseRegionRecommender
+from region_search.backends import BackendConfig, load_backend
+from region_search.corpora import WordNet
+from region_search.phrase import PhraseRegionRecommender
+from region_search.recommender import Region, RegionRecommender
+from region_search.srv import Embed, PhraseSimilarity, RecommendRegion
 from ros_harness import RosCore, RosLaunch
 
-CONFIG = ROOT / "src" / "igmm_layers" / "config"
+CONFIG = ROOT / "src" / "region_search" / "config"
 PREFIXES = ["", "where is ", "please find ", "I am looking for ", "take me to ", "show me ",
             "can you find "]
 SUFFIXES = ["", " please", " now", " quickly", " on this floor", " for me"]
@@ -93,18 +95,14 @@ def in_process(backend: str, args, phrases, labels, calls) -> dict:
 
 
 def through_ros(backend: str, args, core, work: Path, phrases, labels, calls) -> dict:
-    import rospy
-
-    from igmm_layers.srv import Embed, PhraseSimilarity, RecommendRegion
-
     env, logs = core.env(), work / "logs"
     started = time.monotonic()
-    server = RosLaunch.node("igmm_layers", "embedding_server", name="embedding_server",
+    server = RosLaunch.node("region_search", "embedding_server", name="embedding_server",
                             master_uri=core.uri, log_dir=logs, env=env,
                             params=server_params(backend, args)).start()
     recommender_params = yaml.safe_load((CONFIG / "region_search.yaml").read_text())
     recommender_params.update(labels_path=str(work / "labels.json"), layer_service="")
-    recommender = RosLaunch.node("igmm_layers", "region_recommender", name="region_recommender",
+    recommender = RosLaunch.node("region_search", "region_recommender", name="region_recommender",
                                  master_uri=core.uri, log_dir=logs, env=env,
                                  params=recommender_params).start()
     try:
@@ -162,8 +160,6 @@ def main() -> int:
     core = RosCore(log_dir=work / "logs").start()
     os.environ.update(core.env())
     try:
-        import rospy
-
         rospy.init_node("nlp_latency_bench", anonymous=True, disable_signals=True)
         for backend in backends:
             print(f"{backend}: through ROS ...", flush=True)

@@ -10,6 +10,8 @@ from typing import Dict, List, Sequence, Tuple
 
 import numpy as np
 
+from traffic_gp.baselines import BinnedMean, FreMEn
+
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "artifacts" / "bench"
 SHARED_MAPS = Path(os.environ.get("SHARED_DATA_DIR", str(ROOT.parent / "shared" / "data"))) / "maps"
@@ -50,8 +52,6 @@ def choose_baselines(cells, train, *, period: float = 24.0, seed: int = 0) -> Di
     expectation is the exposure-weighted squared error against the true rate plus a constant),
     then refitted on all training rows. Keys: binned_mean, fremen (log-likelihood) and
     binned_mean_mse, fremen_mse (squared error)."""
-    from traffic_gp.baselines import BinnedMean, FreMEn
-
     order = np.random.default_rng(seed).permutation(len(train))
     cut = int(0.8 * len(train))
     fit_part, val_part = train.subset(order[:cut]), train.subset(order[cut:])

@@ -21,10 +21,12 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import traffic_common as tc  # noqa: E402
 
-from traffic_gp.evaluation import day_times, model_counts, rmse, simulator_for, weekday_views  # noqa: E402
+import traffic_gp.plots as plots  # noqa: E402
+from traffic_gp.model import TrafficGP  # noqa: E402
 from traffic_gp.observations import Observations  # noqa: E402
 from traffic_gp.posterior import PosteriorSnapshot  # noqa: E402
 from traffic_gp.queries import CrowdQueries  # noqa: E402
+from traffic_gp.sim.evaluation import day_times, model_counts, rmse, simulator_for, weekday_views  # noqa: E402
 
 
 def timed(function, repeat: int = 5) -> float:
@@ -39,8 +41,6 @@ def timed(function, repeat: int = 5) -> float:
 
 
 def training_runs(sizes, steps: int) -> list:
-    from traffic_gp.model import TrafficGP
-
     sim = simulator_for("generated:0", 0.5, seed=1)
     truth_times = day_times(10.0)
     truth = sim.expected_count(truth_times)
@@ -81,8 +81,6 @@ def cold_load_seconds(path: Path, loader: str) -> float:
 
 
 def cell_size_runs(sizes, steps: int) -> list:
-    from traffic_gp.model import TrafficGP
-
     runs = []
     for cell_size in sizes:
         sim = simulator_for("generated:0", cell_size, seed=1)
@@ -95,9 +93,7 @@ def cell_size_runs(sizes, steps: int) -> list:
                                                    saturation_density=1.0), repeat=3)
         path = tc.OUT / f"traffic_cost_model_{cell_size}.npz"
         model.save(path)
-        from traffic_gp.model import TrafficGP as Loader
-
-        load = timed(lambda p=path: Loader.load(p), repeat=3)
+        load = timed(lambda p=path: TrafficGP.load(p), repeat=3)
         snapshot_load = timed(lambda p=path: PosteriorSnapshot.load(p), repeat=3)
         snapshot = CrowdQueries(PosteriorSnapshot.load(path), sim.cells)
         snapshot_predict = timed(lambda q=snapshot: q.densities([58.8]))
@@ -144,8 +140,6 @@ def main(argv=None) -> int:
           f"NumPy posterior (what the node serves from at start) {cold_numpy:.2f} s "
           f"[{'ok' if cold_numpy < 2 else 'MISSED'}]; trainable GPflow model {cold:.1f} s (most of "
           f"it importing TensorFlow; {at_05['load_s']:.2f} s once TensorFlow is imported)")
-    from traffic_gp import plots
-
     plots.lines({"train": [r["views"] for r in training]},
                 {"train": [r["train_total_s"] for r in training]}, tc.OUT / "traffic_cost_train.png",
                 xlabel="observations (robot views)", ylabel="seconds", logx=True,

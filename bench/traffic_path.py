@@ -21,12 +21,15 @@ from scipy.sparse import csgraph
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import traffic_common as tc  # noqa: E402
 
-from robot_sim.maps import FREE, OCCUPIED, GridMap  # noqa: E402
-from robot_sim.people import CellGrid, HallLayout, PeopleSimulator  # noqa: E402
-from traffic_gp import costmap  # noqa: E402
-from traffic_gp.evaluation import TruthModel, weekday_views  # noqa: E402
+import traffic_gp.costmap as costmap  # noqa: E402
+import traffic_gp.plots as plots  # noqa: E402
+from robot_common.cells import CellGrid  # noqa: E402
+from robot_common.maps import FREE, OCCUPIED, GridMap  # noqa: E402
+from robot_sim.people import HallLayout, PeopleSimulator  # noqa: E402
+from traffic_gp.model import TrafficGP  # noqa: E402
 from traffic_gp.observations import Observations  # noqa: E402
 from traffic_gp.queries import CrowdQueries  # noqa: E402
+from traffic_gp.sim.evaluation import TruthModel, weekday_views  # noqa: E402
 
 SPEED = 1.0           # m/s
 WEIGHT = 4.0          # a cell of cost 95 counts as 1 + 4 = 5 times its length
@@ -110,8 +113,6 @@ def main(argv=None) -> int:
     sim, boxes = two_hallway_floor()
     train = weekday_views(sim, views, weeks=2)
     rows = Observations.from_views(sim.cells, train).compress(1 / 60.0, 24.0)
-    from traffic_gp.model import TrafficGP
-
     start = time.perf_counter()
     model = TrafficGP(n_steps=steps, progress=True).fit(rows)
     print(f"  trained on {len(train)} views in {time.perf_counter() - start:.0f} s", flush=True)
@@ -158,8 +159,6 @@ def main(argv=None) -> int:
     ratio = summary["crowd map"]["expected_people"] / base
     print(f"  with the crowd map the robot meets {ratio:.2f}x the people of the shortest path "
           f"for {summary['crowd map']['metres'] / summary['shortest']['metres']:.2f}x the distance")
-    from traffic_gp import plots
-
     plots.bars({name: {"people met, all trips": row["people_met"],
                        "people met, trips in a rush": row["people_met_in_rushes"] or 0.0}
                 for name, row in summary.items()}, tc.OUT / "traffic_path.png",

@@ -23,7 +23,10 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import traffic_common as tc  # noqa: E402
 
-from traffic_gp.evaluation import (  # noqa: E402
+from traffic_gp.baselines import BinnedMean, FreMEn  # noqa: E402
+from traffic_gp.model import TrafficGP  # noqa: E402
+from traffic_gp.observations import Observations  # noqa: E402
+from traffic_gp.sim.evaluation import (  # noqa: E402
     TruthModel,
     day_times,
     heldout,
@@ -34,14 +37,11 @@ from traffic_gp.evaluation import (  # noqa: E402
     truth_in_band,
     weekday_views,
 )
-from traffic_gp.observations import Observations  # noqa: E402
 
 TARGET_RATIO, COVER = 0.8, (0.85, 0.95)
 
 
 def run_map(spec: str, args) -> dict:
-    from traffic_gp.model import TrafficGP
-
     name = tc.map_name(spec)
     print(f"\n== {name} ==", flush=True)
     sim = simulator_for(spec, args.cell_size, seed=1)
@@ -101,8 +101,6 @@ def run_map(spec: str, args) -> dict:
 
 def rmse_by_setting(sim, train, times, truth) -> dict:
     """Each baseline's RMSE against the truth for each of its settings."""
-    from traffic_gp.baselines import BinnedMean, FreMEn
-
     binned = {v: rmse(model_counts(BinnedMean(sim.cells, bin_minutes=v).fit(train), sim, times),
                       truth) for v in (5, 10, 15, 20, 30, 60)}
     fremen = FreMEn(sim.cells).fit(train)

@@ -19,8 +19,16 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import traffic_common as tc  # noqa: E402
 
-from traffic_gp.evaluation import day_times, heldout, model_counts, rmse, simulator_for  # noqa: E402
+from traffic_gp.model import TrafficGP  # noqa: E402
 from traffic_gp.observations import Observations  # noqa: E402
+from traffic_gp.sim.evaluation import (  # noqa: E402
+    TruthModel,
+    day_times,
+    heldout,
+    model_counts,
+    rmse,
+    simulator_for,
+)
 
 WEEK = 168.0
 DAYS = {"Wednesday": 2, "Saturday": 5}
@@ -36,9 +44,6 @@ def whole_week_views(sim, n_views: int, *, weeks: int, start_week: int = 0) -> l
 
 
 def main(argv=None) -> int:
-    from traffic_gp.evaluation import TruthModel
-    from traffic_gp.model import TrafficGP
-
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small smoke run")
     parser.add_argument("--views", type=int)

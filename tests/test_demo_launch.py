@@ -36,7 +36,8 @@ def test_demo_launch_brings_up_the_whole_stack_and_each_part_works(stack, rospy_
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import Joy
 
-    from igmm_layers.srv import LocateObjects, RecommendRegion
+    from igmm_layers.srv import LocateObjects
+    from region_search.srv import RecommendRegion
     from ros_mongo import open_store
     from traffic_gp.srv import PredictCount
 

@@ -8,13 +8,13 @@ from io import BytesIO
 
 import pytest
 
-from ros_harness import HarnessError, ProcessDied, RosLaunch, http_get_json, master_graph
+from ros_harness import HarnessError, LaunchSet, ProcessDied, RosLaunch, http_get_json, master_graph
 
 
 def test_generated_message_class_imports_and_round_trips():
-    from igmm_layers.msg import ObjectObservation
+    from robot_common.msg import ObjectObservation
 
-    assert ObjectObservation._type == "igmm_layers/ObjectObservation"
+    assert ObjectObservation._type == "robot_common/ObjectObservation"
     assert ObjectObservation.__slots__ == ["header", "class_name", "position", "confidence",
                                            "size", "region_id"]
     sent = ObjectObservation(class_name="chair", confidence=0.75, region_id="floor_4")
@@ -76,6 +76,18 @@ def test_waiting_on_a_node_that_dies_reports_its_log(roscore, tmp_path):
             broken.wait_for_topics(["/map"], timeout=30)
     finally:
         broken.stop()
+
+
+@pytest.mark.ros
+def test_a_launch_set_stops_its_launches_and_deletes_their_parameters(roscore, tmp_path):
+    launches = LaunchSet(roscore, tmp_path)
+    node = launches.node("robot_sim", "map_publisher", name="set_map_publisher", params={"seed": 3})
+    node.wait_for_topics(["/map"], timeout=60)
+    graph = master_graph(roscore.uri)
+    assert graph.getParam("/set_map_publisher/seed") == 3
+    launches.stop_all()
+    assert not node.process.alive and launches.launched == []
+    assert not graph.hasParam("/set_map_publisher/seed")
 
 
 def test_a_missing_program_is_a_clear_error(tmp_path, monkeypatch):

@@ -2,4 +2,4 @@
 from catkin_pkg.python_setup import generate_distutils_setup
 from setuptools import setup
 
-setup(**generate_distutils_setup(packages=["ros_mongo"], package_dir={"": "src"}))
+setup(**generate_distutils_setup(packages=["ros_mongo", "ros_mongo.backends"], package_dir={"": "src"}))

@@ -2,4 +2,4 @@
 from catkin_pkg.python_setup import generate_distutils_setup
 from setuptools import setup
 
-setup(**generate_distutils_setup(packages=["traffic_gp"], package_dir={"": "src"}))
+setup(**generate_distutils_setup(packages=["traffic_gp", "traffic_gp.sim"], package_dir={"": "src"}))

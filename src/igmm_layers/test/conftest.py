@@ -1,6 +1,5 @@
 """Fixtures of the igmm_layers tests: a real layer server (node `igmm_layers`) per test module,
-and a helper that publishes observations and waits until the server has taken all of them in;
-`@pytest.mark.wordnet` skips a test when Debian's wordnet-base is not installed."""
+and a helper that publishes observations and waits until the server has taken all of them in."""
 import uuid
 from pathlib import Path
 from typing import Dict, Optional
@@ -8,22 +7,13 @@ from typing import Dict, Optional
 import pytest
 import yaml
 
-from igmm_layers.corpora import DEFAULT_WORDNET_DIR
+from igmm_layers.srv import LayerInfo
+from robot_common.msg import ObjectObservation
 from ros_harness import RosLaunch, wait_until
 
-WORDNET = Path(DEFAULT_WORDNET_DIR)
 CONFIG = Path(__file__).resolve().parent.parent / "config" / "igmm_layers.yaml"
 SERVICES = ["lookup_object", "pair_likelihood", "alternate_object", "locate_objects", "count_objects",
             "save_clusters", "load_clusters", "layer_info"]
-
-
-def pytest_configure(config):
-    config.addinivalue_line("markers", "wordnet: needs Debian's wordnet-base (scripts/setup.sh)")
-
-
-def pytest_runtest_setup(item):
-    if item.get_closest_marker("wordnet") and not (WORDNET / "data.noun").is_file():
-        pytest.skip("Debian's wordnet-base is not installed (scripts/setup.sh)")
 
 
 def server_params(**overrides) -> Dict[str, object]:
@@ -69,9 +59,6 @@ def start_layer_server(roscore, tmp_path):
 def observe(rospy_node):
     """observe(messages, topic=..., server="igmm_layers"): publish and wait until the server's
     received == applied + dropped counts include them; returns its LayerInfo afterwards."""
-    from igmm_layers.msg import ObjectObservation
-    from igmm_layers.srv import LayerInfo
-
     publishers = {}
 
     def send(messages, topic: str = "/igmm_layers/observations", server: str = "igmm_layers",

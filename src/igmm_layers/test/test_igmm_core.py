@@ -8,8 +8,8 @@ import pytest
 
 from igmm_layers import IncrementalGMM
 from igmm_layers.errors import InvalidInputError, NotFittedError
-from igmm_layers.metrics import match_scores, ospa
-from igmm_layers.reference import ReferenceIGMM
+from igmm_layers.sim.metrics import match_scores, ospa
+from igmm_layers.sim.reference import ReferenceIGMM
 from robot_sim.detections import random_scene, simulate_detections
 
 

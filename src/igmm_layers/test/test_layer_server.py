@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from geometry_msgs.msg import Point, TransformStamped, Vector3
 
-from igmm_layers.metrics import match_scores
-from igmm_layers.msg import ClusterSet, ObjectObservation
+from igmm_layers.msg import ClusterSet
+from igmm_layers.sim.metrics import match_scores
 from igmm_layers.srv import (
     AlternateObject,
     CountObjects,
@@ -18,6 +18,7 @@ from igmm_layers.srv import (
     ObjectPairLikelihood,
     SaveClusters,
 )
+from robot_common.msg import ObjectObservation
 from robot_sim import generate_building
 from robot_sim.detections import building_scene, simulate_detections
 from ros_harness import free_port, wait_until

@@ -8,9 +8,9 @@ import yaml
 
 from igmm_layers import ClassHierarchy, ClusterTable, LayerParams, LayerSet
 from igmm_layers.errors import InvalidInputError, NotFittedError, UnknownNameError
-from igmm_layers.metrics import match_scores, ospa
 from igmm_layers.queries import alternate_classes, closest, count_observed, most_likely, pair_likelihood
 from igmm_layers.server_config import ServerConfig
+from igmm_layers.sim.metrics import match_scores, ospa
 from igmm_layers.visual import class_colour, ellipse
 
 CONFIG = Path(__file__).resolve().parent.parent / "config" / "igmm_layers.yaml"

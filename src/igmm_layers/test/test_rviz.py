@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from geometry_msgs.msg import Point, Vector3
 
-from igmm_layers.msg import ObjectObservation
 from igmm_layers.srv import LocateObjects
+from robot_common.msg import ObjectObservation
 from robot_sim import generate_building
 from robot_sim.detections import building_scene, simulate_detections
 from ros_harness import RosLaunch, wait_until

@@ -2,8 +2,9 @@
 import numpy as np
 import pytest
 
-from robot_sim.errors import SimError
-from robot_sim.scenarios import load_scenario, run_episode, scenario_from_yaml, scenarios_dir
+from robot_common.errors import TaskError
+from robot_common.tasks import scenario_from_yaml
+from robot_sim.scenarios import load_scenario, run_episode, scenarios_dir
 
 
 @pytest.mark.parametrize("name", ["static_obstacle", "moving_obstacle", "oscillating_obstacle"])
@@ -75,14 +76,14 @@ def test_episode_stops_at_collision_and_at_the_goal():
     ("[unclosed", "not valid YAML"),
 ])
 def test_bad_scenarios_get_clear_errors(text, message):
-    with pytest.raises(SimError, match=message):
+    with pytest.raises(TaskError, match=message):
         scenario_from_yaml(text)
 
 
 def test_missing_scenario_file_and_impossible_starts():
-    with pytest.raises(SimError, match="cannot read scenario file"):
+    with pytest.raises(TaskError, match="cannot read scenario file"):
         load_scenario("no_such_scenario")
     assert (scenarios_dir() / "static_obstacle.yaml").is_file()
     blocked = scenario_from_yaml("goal: {x: 0, y: 0}\nobstacle: {x: -2.45, y: 0, radius: 1.5}")
-    with pytest.raises(SimError, match="no start clear"):
+    with pytest.raises(TaskError, match="no start clear"):
         blocked.sample_start(0)

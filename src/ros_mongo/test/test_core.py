@@ -9,6 +9,7 @@ from geometry_msgs.msg import Point, Pose, PoseArray
 from sensor_msgs.msg import Image, LaserScan
 from std_msgs.msg import Int64, String, UInt64MultiArray
 
+from robot_common.errors import ConfigError
 from ros_harness import wait_until
 from ros_mongo import (
     QueryError,
@@ -19,9 +20,13 @@ from ros_mongo import (
     open_store,
     parse_query,
 )
+from ros_mongo.documents import query_conditions, to_selector
 from ros_mongo.msgtypes import message_class, to_fields
+from ros_mongo.recorder import Recorder
 from ros_mongo.records import split_time
 from ros_mongo.replay import Replayer
+from ros_mongo.ros_recorder import RecorderConfig
+from ros_mongo.ros_retriever import RetrieverConfig, configured_query
 from ros_mongo.spool import Spool
 
 
@@ -124,8 +129,6 @@ def test_spool_cuts_a_torn_frame_and_is_exclusive(tmp_path):
 # -- the recorder core ---------------------------------------------------------------------
 @pytest.mark.db
 def test_recorder_spools_what_the_queue_cannot_hold_and_stores_it_decoded(couchdb_url, tmp_path):
-    from ros_mongo.recorder import Recorder
-
     with open_store(couchdb_url) as store:
         spool = Spool(tmp_path / "rec.spool").open()
         recorder = Recorder(store, spool, max_queue_bytes=100, batch_period=0.05, session_id="s",
@@ -180,14 +183,34 @@ def test_replay_of_nothing_finishes(replay_store):
     assert replayer.wait(10) and replayer.state == "finished" and replayer.published == 0
 
 
-# -- node defaults -------------------------------------------------------------------------------
-@pytest.mark.parametrize("module,config", [("ros_recorder", "ros_mongo_server.yaml"),
-                                           ("ros_retriever", "ros_mongo_retriever.yaml")])
-def test_config_files_hold_the_node_defaults(workspace_root, module, config):
-    import importlib
+# -- node parameters -----------------------------------------------------------------------------
+# (config/*.yaml are generated from these classes; tests/test_structure.py checks they are current)
+def test_recorder_config_rejects_a_bad_pattern_and_unknown_keys():
+    assert RecorderConfig.from_mapping({}).topics == ["/camera/rgb/image_raw", "/joint_states", "/scan",
+                                                      "/odom"]
+    with pytest.raises(ConfigError, match="~include holds a bad regular expression"):
+        RecorderConfig.from_mapping({"include": ["("]})
+    with pytest.raises(ConfigError, match="unknown parameter"):
+        RecorderConfig.from_mapping({"batchsize": 10})
 
-    import yaml
 
-    defaults = importlib.import_module(f"ros_mongo.{module}").DEFAULTS
-    loaded = yaml.safe_load((workspace_root / "src" / "ros_mongo" / "config" / config).read_text())
-    assert loaded == defaults
+def test_retriever_config_builds_its_query():
+    config = RetrieverConfig.from_mapping({"topics": ["/odom", "/scan"], "start_time": 5,
+                                           "query": "tags lidar"})
+    query = configured_query(config)
+    assert query.topics == ["/odom", "/scan"] and query.tags == ["lidar"] and query.start_time == 5.0
+    assert query.end_time is None
+    with pytest.raises(ConfigError, match="bad query: unknown query key"):
+        RetrieverConfig.from_mapping({"query": "colour red"})
+
+
+# -- the one Query -> filter translation ---------------------------------------------------------
+def test_query_conditions_render_one_selector_for_both_databases():
+    query = parse_query('{topics: [/a, /b], tags: [x], start_time: 1, end_time: 2, '
+                        'fields: {pose.x: [0, 1], header.frame_id: map}}')
+    assert to_selector(query_conditions(query)) == {
+        "topic": {"$in": ["/a", "/b"]}, "tags": {"$all": ["x"]},
+        "receive_time": {"$gte": 1.0, "$lte": 2.0}, "msg.pose.x": {"$gte": 0, "$lte": 1},
+        "msg.header.frame_id": "map"}
+    assert to_selector(query_conditions(parse_query("topic /a"))) == {"topic": "/a"}
+    assert to_selector(query_conditions(parse_query(""))) == {}

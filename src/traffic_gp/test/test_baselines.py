@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from robot_sim import FREE, GridMap
-from robot_sim.people import CellGrid
+from robot_common.cells import CellGrid
+from robot_common.maps import FREE, GridMap
 from traffic_gp.baselines import BinnedMean, FreMEn
 from traffic_gp.errors import ConfigError, NotFittedError
 from traffic_gp.observations import Observations

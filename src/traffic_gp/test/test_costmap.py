@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from robot_sim import FREE, OCCUPIED, UNKNOWN, GridMap
-from robot_sim.people import CellGrid
-from traffic_gp import costmap
+import traffic_gp.costmap as costmap
+from robot_common.cells import CellGrid
+from robot_common.maps import FREE, OCCUPIED, UNKNOWN, GridMap
 from traffic_gp.errors import ConfigError
 
 

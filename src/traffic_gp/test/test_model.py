@@ -9,10 +9,11 @@ from robot_sim import generate_building
 from robot_sim.people import PeopleSimulator
 from traffic_gp.baselines import BinnedMean
 from traffic_gp.errors import ConfigError, ModelFormatError, NotFittedError
-from traffic_gp.evaluation import day_times, model_counts, rmse
 from traffic_gp.model import TrafficGP
 from traffic_gp.observations import Observations
-from traffic_gp.persistence import read_header
+from traffic_gp.persistence import PARAM_PREFIX, read_header
+from traffic_gp.posterior import PosteriorSnapshot
+from traffic_gp.sim.evaluation import day_times, model_counts, rmse
 
 
 def weekday_views(sim, per_day, days, seed_start=0.0):
@@ -141,8 +142,6 @@ def test_the_weekly_model_tells_days_apart_and_the_daily_one_repeats(small_world
 def test_numpy_posterior_of_a_saved_model_predicts_what_gpflow_predicts(small_world, fitted, layout,
                                                                         tmp_path):
     """The snapshot re-implements the SVGP's predictions in NumPy; GPflow is the reference."""
-    from traffic_gp.posterior import PosteriorSnapshot
-
     sim, obs = small_world
     model = {"space x day + space x hour x day": fitted,
              "space x day": TrafficGP(n_inducing=30, hourly=False, n_steps=40, batch_size=512),
@@ -179,9 +178,6 @@ def test_a_saved_model_loads_and_predicts_without_tensorflow(fitted, tmp_path):
 
 
 def test_a_damaged_parameter_set_is_a_clear_error(fitted, tmp_path):
-    from traffic_gp.persistence import PARAM_PREFIX
-    from traffic_gp.posterior import PosteriorSnapshot
-
     path = fitted.save(tmp_path / "crowd.npz")
     with np.load(path) as archive:
         arrays = {k: archive[k] for k in archive.files if k != PARAM_PREFIX + ".q_sqrt"}

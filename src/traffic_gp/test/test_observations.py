@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
+from robot_common.cells import CellGrid, View
 from robot_sim import generate_building
-from robot_sim.people import CellGrid, View
 from traffic_gp.errors import ObservationError
 from traffic_gp.observations import Observations, aggregate_view
 

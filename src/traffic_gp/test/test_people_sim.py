@@ -4,17 +4,11 @@ import datetime
 import numpy as np
 import pytest
 
-from robot_sim import FREE, OCCUPIED, GridMap, SimError, generate_building
-from robot_sim.people import (
-    CellGrid,
-    HallLayout,
-    PeopleSimulator,
-    building_layout,
-    derive_halls,
-    exposure,
-    hours_of_week,
-    visible_cells,
-)
+from robot_common.cells import CellGrid, exposure, hours_of_week, visible_cells
+from robot_common.errors import MapError
+from robot_common.maps import FREE, OCCUPIED, GridMap
+from robot_sim import SimError, generate_building
+from robot_sim.people import HallLayout, PeopleSimulator, building_layout, derive_halls
 
 WED = 48.0
 
@@ -126,9 +120,9 @@ def test_derived_halls_find_the_generated_main_hall():
 def test_bad_requests_and_maps_raise_clear_errors(sim):
     with pytest.raises(SimError, match="bad observation request"):
         sim.observe(10, robots=0)
-    with pytest.raises(SimError, match="cell_size"):
+    with pytest.raises(MapError, match="cell_size"):      # CellGrid is robot_common's now
         CellGrid.from_map(two_rooms(), 0.0)
-    with pytest.raises(SimError, match="no free cell"):
+    with pytest.raises(MapError, match="no free cell"):
         CellGrid.from_map(GridMap(np.full((5, 5), OCCUPIED, np.int8), 0.1), 0.2)
 
 

@@ -1,23 +1,28 @@
 """The ROS nodes through roslaunch: observations in, services and crowd cost maps out."""
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from robot_sim import OCCUPIED, generate_building, save_map
+from robot_common.maps import OCCUPIED, save_map
+from robot_common.msg import PeopleCount
+from robot_sim import generate_building
 from robot_sim.people import PeopleSimulator
+from robot_sim.ros_people import sim_stamp
 from ros_harness import wait_until
 from traffic_gp.model import TrafficGP
 from traffic_gp.observations import Observations
 from traffic_gp.persistence import read_header
+from traffic_gp.srv import PredictCount, PredictRegion
 
 pytestmark = pytest.mark.ros
 NODE = "/traffic_gp"
+# The workspace-level composition of robot_sim's map and people simulators with this server.
+CROWD_SIM = Path(__file__).resolve().parents[3] / "launch" / "crowd_sim.launch"
 
 
 def services(rospy):
-    from traffic_gp.srv import PredictCount, PredictRegion
-
     return (rospy.ServiceProxy(f"{NODE}/predict_count", PredictCount),
             rospy.ServiceProxy(f"{NODE}/predict_region", PredictRegion))
 
@@ -32,10 +37,8 @@ def test_learns_from_simulated_robots_and_serves_a_crowd_costmap(roslaunch, rosp
     from nav_msgs.msg import OccupancyGrid
     from std_srvs.srv import Trigger
 
-    from traffic_gp.msg import PeopleCount
-
     model_path = tmp_path / "crowd.npz"
-    launch = roslaunch("traffic_gp", "crowd_sim.launch", seed=0, time_scale=600, rate=10,
+    launch = roslaunch(str(CROWD_SIM), seed=0, time_scale=600, rate=10,
                        min_rows=1500, initial_steps=10, publish_period=1.0,
                        model_path=str(model_path))
     launch.wait_for_services([f"{NODE}/predict_count", f"{NODE}/predict_region"], timeout=90)
@@ -97,8 +100,6 @@ def saved_model(tmp_path):
 def test_a_saved_model_is_served_as_saved_without_training(roslaunch, rospy_node, saved_model):
     import rospy
 
-    from traffic_gp.ros_people import sim_stamp
-
     model, model_path, map_yaml = saved_model
     roslaunch("traffic_gp", "traffic_gp.launch", map_yaml=str(map_yaml), model_path=str(model_path),
               utc_offset_hours=0).wait_for_services([f"{NODE}/predict_count"], timeout=90)
@@ -113,8 +114,6 @@ def test_a_saved_model_is_served_as_saved_without_training(roslaunch, rospy_node
 
     # new observations: the node loads the trainable model and keeps learning from the file's state
     from geometry_msgs.msg import Point
-
-    from traffic_gp.msg import PeopleCount
 
     publisher = rospy.Publisher("/people_counts", PeopleCount, queue_size=10)
     wait_until(lambda: publisher.get_num_connections() > 0, 10, what="a subscriber")

@@ -31,7 +31,7 @@ from typing import Dict, List
 import numpy as np
 
 from igmm_layers.errors import InvalidInputError, NotFittedError
-from igmm_layers.igmm_data import canonical_order, rank_one_terms, validate_samples
+from igmm_layers.igmm_data import canonical_order, rank_one_terms, restore_components, validate_samples
 
 __all__ = ["IncrementalGMM"]
 
@@ -390,8 +390,6 @@ class IncrementalGMM:
     @classmethod
     def from_dict(cls, state: Dict[str, object]) -> "IncrementalGMM":
         """The model that `to_dict` described (precisions recomputed from the covariances)."""
-        from igmm_layers.igmm_data import restore_components
-
         try:
             model = cls(**dict(state["params"]))
         except (KeyError, TypeError) as err:

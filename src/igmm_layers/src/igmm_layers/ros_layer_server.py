@@ -12,9 +12,11 @@ from geometry_msgs.msg import PointStamped
 from visualization_msgs.msg import MarkerArray
 
 from igmm_layers.errors import IGMMError, InvalidInputError
-from igmm_layers.msg import ClusterSet, ObjectObservation
+from igmm_layers.msg import ClusterSet
 from igmm_layers.ros_convert import apply_cluster_set, layer_markers, rotation_matrix, size_covariance
+from igmm_layers.ros_services import LayerServices
 from igmm_layers.server_config import ServerConfig
+from robot_common.msg import ObjectObservation
 
 __all__ = ["LayerServer", "marker_topic"]
 
@@ -30,7 +32,8 @@ def marker_topic(region_id: str, kind: str) -> str:
 class LayerServer:
     """Learns object layers from detections and answers queries about them (node `igmm_layers`).
 
-    Parameters (defaults in config/igmm_layers.yaml; see the README for details):
+    Parameters (server_config.ServerParams; defaults in config/igmm_layers.yaml, generated from
+    it; see the README for details):
       ~map_frame (str, "map"): the frame of all clusters; observations are transformed into it.
       ~default_region (str, "default"): region of observations that name none.
       ~observation_topic (str, "observations"), ~place_observation_topic (str, "place_observations"):
@@ -40,13 +43,14 @@ class LayerServer:
           m), novelty_constant 0.01, v_min 100, sp_min 3.0, dimensions 2, batch false, max_times 1000.
       ~regions (list, []): per-region layers {region_id, kind, observation_topic, <layer params>};
           an observation_topic subscribes that layer's own topic.
-      ~class_hierarchy (dict): groups, e.g. furniture: [chair, table, desk, couch].
-      ~class_colours (dict, {}): [r, g, b] in [0, 1] per class (others: a hue from the name).
+      ~class_hierarchy (dict): groups: furniture, appliance, fixture (see the YAML).
+      ~class_colours (dict): [r, g, b] in [0, 1] per class of the generated building (others: a
+          hue from the name).
       ~marker_rate (double, 2.0 Hz; 0: no markers), ~pair_method (str, "overlap"),
       ~pair_max_distance (double, 5.0 m), ~db_url (str, ""), ~tf_timeout (double, 0.2 s),
       ~queue_size (int, 10000): observations waiting to be learnt (more are dropped and counted).
     Topics:
-      in:  ~observations, ~place_observations, per-region topics (igmm_layers/ObjectObservation);
+      in:  ~observations, ~place_observations, per-region topics (robot_common/ObjectObservation);
            ~restore (igmm_layers/ClusterSet): replaces the layers it contains.
       out: ~markers/<region>/<objects|regions> (visualization_msgs/MarkerArray, only when
            subscribed); ~restore (latched, by ~load_clusters).
@@ -70,8 +74,6 @@ class LayerServer:
 
     # --- wiring -----------------------------------------------------------------------------
     def setup(self) -> None:
-        from igmm_layers.ros_services import LayerServices
-
         self.tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(60))
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
         size = self.config.queue_size

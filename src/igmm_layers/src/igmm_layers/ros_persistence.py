@@ -1,9 +1,13 @@
-"""Cluster sets in the robot database (through the ros_mongo storage API)."""
+"""Cluster sets in the robot database (through the ros_mongo storage API).
+
+Storage errors are re-raised as PersistenceError naming the database (credentials redacted).
+"""
 import datetime
 from typing import Tuple
 
 from igmm_layers.errors import PersistenceError
 from igmm_layers.msg import ClusterSet
+from ros_mongo import StoreError, open_store, redact_url
 
 __all__ = ["CLUSTER_TOPIC", "TAG", "timestamp_tag", "save_cluster_set", "load_cluster_set"]
 
@@ -18,23 +22,17 @@ def timestamp_tag(seconds: float) -> str:
 
 
 def _open(db_url: str):
-    from ros_mongo import open_store
-
     if not db_url:
         raise PersistenceError("no database configured (set the ~db_url parameter)")
     return open_store(db_url)
 
 
 def _where(db_url: str) -> str:
-    from ros_mongo import redact_url
-
     return redact_url(db_url)
 
 
 def save_cluster_set(db_url: str, msg: ClusterSet) -> Tuple[str, str]:
     """Store `msg` with tags "objects" and its timestamp; returns (document id, timestamp tag)."""
-    from ros_mongo import StoreError
-
     stamp = msg.header.stamp.to_sec()
     tag = timestamp_tag(stamp)
     try:
@@ -47,8 +45,6 @@ def save_cluster_set(db_url: str, msg: ClusterSet) -> Tuple[str, str]:
 
 def load_cluster_set(db_url: str, timestamp: str = "") -> Tuple[ClusterSet, str, str]:
     """The latest saved set, or the one with this timestamp tag: (message, id, timestamp tag)."""
-    from ros_mongo import StoreError
-
     tags = [TAG, timestamp] if timestamp else [TAG]
     try:
         with _open(db_url) as store:

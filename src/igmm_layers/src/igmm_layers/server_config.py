@@ -1,61 +1,113 @@
-"""The layer server's configuration from its ROS parameters (a plain dict; no rospy here).
+"""The layer server's parameters (`ServerParams`, a robot_common.params class; no rospy here)
+and their conversion into the layers' objects (`ServerConfig`: LayerParams per region,
+ClassHierarchy, colours).
 
-Defaults live in config/igmm_layers.yaml; every key is documented there and in the README.
+config/igmm_layers.yaml is generated from ServerParams, where each default is written once (the
+per-layer defaults are LayerParams'); `python -m robot_common.config_files --write` regenerates
+it. Bad values raise InvalidInputError (the package's error) naming the parameter.
 """
 import math
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Dict, List, Mapping, Tuple
 
 from igmm_layers.errors import InvalidInputError
 from igmm_layers.hierarchy import ClassHierarchy
 from igmm_layers.layers import LayerParams, LayerSet, check_kind
 from igmm_layers.queries import DEFAULT_MAX_DISTANCE, DEFAULT_PAIR_METHOD, PAIR_METHODS
+from robot_common.errors import ConfigError
+from robot_common.params import NodeConfig, param
 
-__all__ = ["ServerConfig"]
+__all__ = ["ServerParams", "ServerConfig"]
 
-_KEYS = ("map_frame", "default_region", "observation_topic", "place_observation_topic",
-         "layer_defaults", "regions", "class_hierarchy", "class_colours", "marker_rate",
-         "pair_method", "pair_max_distance", "db_url", "tf_timeout", "queue_size")
+_LAYER_DEFAULTS = {name: value for name, value in asdict(LayerParams()).items()
+                   if name != "observation_topic"}
+_CLASS_HIERARCHY = {
+    "furniture": ["chair", "table", "desk", "couch"],
+    "appliance": ["fridge", "microwave", "printer", "computer", "vending_machine"],
+    "fixture": ["sink", "whiteboard", "water_fountain", "trash_can", "plant"],
+}
+_CLASS_COLOURS = {
+    "chair": [0.90, 0.10, 0.29], "table": [0.24, 0.71, 0.29], "desk": [0.00, 0.51, 0.78],
+    "couch": [0.96, 0.51, 0.19], "whiteboard": [0.57, 0.12, 0.71], "computer": [0.27, 0.94, 0.94],
+    "fridge": [0.94, 0.20, 0.90], "microwave": [0.82, 0.96, 0.24], "sink": [0.00, 0.50, 0.50],
+    "printer": [0.67, 0.43, 0.16], "trash_can": [0.50, 0.00, 0.00], "plant": [0.50, 0.50, 0.00],
+    "water_fountain": [0.00, 0.00, 0.50], "vending_machine": [1.00, 0.88, 0.10],
+}
+
+
+@dataclass
+class ServerParams(NodeConfig):
+    """The layer server's private parameters as given (node `igmm_layers`)."""
+
+    map_frame: str = param("map", "frame of all clusters; observations in other frames are "
+                           "transformed into it with tf2")
+    default_region: str = param("default", "region of observations whose region_id is empty")
+    observation_topic: str = param("observations", "shared topic (robot_common/ObjectObservation) "
+                                   "of the objects layers; relative names are private")
+    place_observation_topic: str = param("place_observations", "shared topic of the regions "
+                                         "layers (labelled places); relative names are private")
+    layer_defaults: dict = param(_LAYER_DEFAULTS, "parameters of every layer (igmm_layers.LayerParams; "
+                                 "see the README)")
+    regions: list = param([], "per-region layers {region_id, kind, observation_topic, <layer "
+                          "parameters>}; observation_topic: that layer's own topic")
+    class_hierarchy: dict = param(_CLASS_HIERARCHY, "groups of classes: a query for a group "
+                                  "covers its classes (groups may contain groups)")
+    class_colours: dict = param(_CLASS_COLOURS, "marker colour [r, g, b] in [0, 1] per class; "
+                                "other classes get a hue from their name")
+    marker_rate: float = param(2.0, "Hz of ~markers/<region>/<kind> while someone listens; 0: none",
+                               minimum=0.0)
+    pair_method: str = param(DEFAULT_PAIR_METHOD, "default method of the object pair likelihood",
+                             choices=PAIR_METHODS)
+    pair_max_distance: float = param(DEFAULT_MAX_DISTANCE, "range (m) of the object pair likelihood")
+    db_url: str = param("", "database of save_clusters/load_clusters (CouchDB http://... or "
+                        "MongoDB mongodb://...); '': none")
+    tf_timeout: float = param(0.2, "seconds to wait for a transform into map_frame before an "
+                              "observation is dropped", minimum=0.0)
+    queue_size: int = param(10000, "observations waiting to be learnt; more are dropped (and "
+                            "counted in ~layer_info)", minimum=1)
 
 
 @dataclass
 class ServerConfig:
-    map_frame: str = "map"
-    default_region: str = "default"
-    observation_topic: str = "observations"
-    place_observation_topic: str = "place_observations"
-    layer_defaults: LayerParams = field(default_factory=LayerParams)
-    regions: Dict[Tuple[str, str], LayerParams] = field(default_factory=dict)
-    hierarchy: ClassHierarchy = field(default_factory=ClassHierarchy)
-    class_colours: Dict[str, Tuple[float, float, float]] = field(default_factory=dict)
-    marker_rate: float = 2.0
-    pair_method: str = DEFAULT_PAIR_METHOD
-    pair_max_distance: float = DEFAULT_MAX_DISTANCE
-    db_url: str = ""
-    tf_timeout: float = 0.2
-    queue_size: int = 10000
+    """The layer server's configuration, converted from its ServerParams (which hold the defaults)."""
+
+    map_frame: str
+    default_region: str
+    observation_topic: str
+    place_observation_topic: str
+    layer_defaults: LayerParams
+    regions: Dict[Tuple[str, str], LayerParams]
+    hierarchy: ClassHierarchy
+    class_colours: Dict[str, Tuple[float, float, float]]
+    marker_rate: float
+    pair_method: str
+    pair_max_distance: float
+    db_url: str
+    tf_timeout: float
+    queue_size: int
 
     @classmethod
     def from_params(cls, params: Mapping[str, object]) -> "ServerConfig":
         """Check and convert the node's private parameters (unknown keys are errors)."""
-        unknown = sorted(set(params) - set(_KEYS))
-        if unknown:
-            raise InvalidInputError(f"unknown parameter(s) {unknown}; known: {sorted(_KEYS)}")
-        config = cls()
-        for key in ("map_frame", "default_region", "observation_topic", "place_observation_topic",
-                    "db_url", "pair_method"):
-            if key in params:
-                setattr(config, key, str(params[key]))
-        for key in ("marker_rate", "pair_max_distance", "tf_timeout"):
-            if key in params:
-                setattr(config, key, _number(params[key], key))
-        if "queue_size" in params:
-            config.queue_size = int(_number(params["queue_size"], "queue_size"))
-        config.layer_defaults = LayerParams.from_dict(_mapping(params.get("layer_defaults", {}),
-                                                               "layer_defaults"))
-        config.regions = _regions(params.get("regions", []), config.layer_defaults)
-        config.hierarchy = ClassHierarchy(_mapping(params.get("class_hierarchy", {}), "class_hierarchy"))
-        config.class_colours = _colours(params.get("class_colours", {}))
+        try:
+            raw = ServerParams.from_mapping(params)
+        except ConfigError as err:
+            raise InvalidInputError(str(err)) from err
+        return cls.from_node_params(raw)
+
+    @classmethod
+    def from_node_params(cls, raw: ServerParams) -> "ServerConfig":
+        """Convert checked parameters into the layers' objects (InvalidInputError if they are bad)."""
+        layer_defaults = LayerParams.from_dict(raw.layer_defaults)
+        config = cls(map_frame=raw.map_frame, default_region=raw.default_region,
+                     observation_topic=raw.observation_topic,
+                     place_observation_topic=raw.place_observation_topic,
+                     layer_defaults=layer_defaults,
+                     regions=_regions(raw.regions, layer_defaults),
+                     hierarchy=ClassHierarchy(raw.class_hierarchy),
+                     class_colours=_colours(raw.class_colours), marker_rate=raw.marker_rate,
+                     pair_method=raw.pair_method, pair_max_distance=raw.pair_max_distance,
+                     db_url=raw.db_url, tf_timeout=raw.tf_timeout, queue_size=raw.queue_size)
         config.check()
         return config
 
@@ -64,6 +116,9 @@ class ServerConfig:
             raise InvalidInputError("map_frame and default_region must not be empty")
         if self.pair_method not in PAIR_METHODS:
             raise InvalidInputError(f"pair_method must be one of {PAIR_METHODS}, got {self.pair_method!r}")
+        for key in ("marker_rate", "pair_max_distance", "tf_timeout"):
+            if not math.isfinite(getattr(self, key)):
+                raise InvalidInputError(f"{key} must be finite, got {getattr(self, key)!r}")
         if not (self.pair_max_distance > 0 and self.marker_rate >= 0 and self.tf_timeout >= 0
                 and self.queue_size >= 1):
             raise InvalidInputError("need pair_max_distance > 0, marker_rate >= 0, tf_timeout >= 0 "
@@ -72,16 +127,6 @@ class ServerConfig:
     def layer_set(self) -> LayerSet:
         return LayerSet(defaults=self.layer_defaults, region_params=self.regions,
                         hierarchy=self.hierarchy, default_region=self.default_region)
-
-
-def _number(value: object, key: str) -> float:
-    try:
-        number = float(value)
-    except (TypeError, ValueError) as err:
-        raise InvalidInputError(f"{key} must be a number, got {value!r}") from err
-    if not math.isfinite(number):
-        raise InvalidInputError(f"{key} must be finite, got {value!r}")
-    return number
 
 
 def _mapping(value: object, key: str) -> Mapping:

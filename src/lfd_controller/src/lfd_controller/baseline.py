@@ -9,6 +9,7 @@ from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
 from lfd_controller.errors import NotFittedError
+from lfd_controller.features import Task
 
 
 def observation(state, t: float, task, dt: float = 0.1) -> np.ndarray:
@@ -32,8 +33,6 @@ class BehaviourCloning:
         self.hidden, self.max_iter, self.random_state = hidden, max_iter, random_state
 
     def fit(self, demos) -> "BehaviourCloning":
-        from lfd_controller.features import Task
-
         inputs, targets = [], []
         for demo in demos:
             task = Task.from_scenario(demo.scenario)

@@ -1,12 +1,16 @@
-"""Demonstrations: start state, commands, episode time and scenario of one drive (no ROS)."""
+"""Demonstrations: start state, commands, episode time and scenario of one drive (no ROS).
+
+A demonstration embeds its navigation task (robot_common.tasks.Scenario): goal, obstacle, robot
+limits and time step; malformed stored demonstrations raise DemonstrationError.
+"""
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
 from lfd_controller.errors import DemonstrationError
-from robot_sim.errors import SimError
-from robot_sim.scenarios import Scenario, scenario_from_yaml
+from robot_common.errors import ModelError, TaskError
+from robot_common.tasks import Scenario, scenario_from_yaml
 
 
 @dataclass
@@ -70,7 +74,7 @@ class Demonstration:
             scenario = scenario_from_yaml(data["scenario_yaml"])
             return cls(scenario, data["start"], data["actions"], float(data.get("t0", 0.0)),
                        data.get("states"), str(data.get("source", "unknown")), dict(data.get("meta") or {}))
-        except (KeyError, TypeError, ValueError, SimError) as err:
+        except (KeyError, TypeError, ValueError, TaskError, ModelError) as err:
             raise DemonstrationError(f"malformed demonstration: {err}") from err
 
 

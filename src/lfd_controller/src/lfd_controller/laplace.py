@@ -27,7 +27,7 @@ class DemoDynamics:
     """Dynamics quantities of one demonstration: states, A_t, B_t, d2f_t and Jx_t = dx_t/dU.
 
     Args:
-        model: a robot_sim.unicycle.Unicycle.
+        model: a robot_common.unicycle.Unicycle.
         start: x_0 (5,); actions: U (T, 2); t0: episode time of x_0.
     """
 

@@ -93,7 +93,7 @@ class RecedingHorizonController:
     first command.
 
     Args:
-        reward: a LinearReward or GPReward; model: robot_sim Unicycle.
+        reward: a LinearReward or GPReward; model: robot_common.unicycle.Unicycle.
         horizon: planning steps of plan_dt (None: model.dt; a coarser step looks further ahead
         for the same cost); terminal: extra weight of the last step's reward
         (holding the final state longer: a cost-to-go estimate that keeps the short horizon from

@@ -70,7 +70,8 @@ def plot_reward_field(reward, scenario, path, demos: Optional[Sequence] = None, 
 
 
 def plot_trajectories(results, scenario, path, title: str = "controller") -> Path:
-    """Closed-loop drives (robot_sim EpisodeResult) coloured by outcome."""
+    """Closed-loop drives (with .states, .times, .success, .collided, e.g. robot_sim's
+    EpisodeResult) coloured by outcome."""
     ok = sum(r.success for r in results)
     fig, ax, plt = _axes(scenario, f"{title}: {ok}/{len(results)} reached the goal without collision")
     _obstacle(ax, plt, scenario, np.linspace(0, max(r.times[-1] for r in results), 6))

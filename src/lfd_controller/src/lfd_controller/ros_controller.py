@@ -9,20 +9,24 @@ from nav_msgs.msg import Odometry, Path
 from sensor_msgs.msg import TimeReference
 from std_msgs.msg import Float64, String
 from std_srvs.srv import SetBool, SetBoolResponse
+from threadpoolctl import threadpool_limits
 
 from lfd_controller.features import Task
+from lfd_controller.learning import load_reward
+from lfd_controller.params import RewardControllerConfig
 from lfd_controller.planner import RecedingHorizonController
-from lfd_controller.ros_common import odom_state
-from robot_sim.errors import SimError
-from robot_sim.maps import yaw_to_quaternion
-from robot_sim.scenarios import scenario_from_yaml
-from robot_sim.unicycle import Unicycle, UnicycleLimits
+from robot_common.errors import ModelError, TaskError
+from robot_common.maps import yaw_to_quaternion
+from robot_common.ros_node import odom_state, read_config
+from robot_common.tasks import scenario_from_yaml
+from robot_common.unicycle import Unicycle
 
 
 class RewardControllerNode:
     """Re-plans from the latest odometry at ~rate Hz and publishes the first command.
 
-    Parameters (defaults in config/reward_controller.yaml):
+    Parameters (lfd_controller.params.RewardControllerConfig; config/reward_controller.yaml):
+      ~reward_file (str, required): a reward saved by learn_reward,
       ~rate (double, 10), ~horizon (int, 20), ~plan_dt (double, 0.2), ~terminal (double, 10),
       ~max_iter (int, 15), ~goal_tolerance (double, 0.25): stop (zero command) inside it,
       ~v_max, ~w_max, ~a_max, ~alpha_max: the robot's limits (the scenario's when one is received),
@@ -36,20 +40,20 @@ class RewardControllerNode:
     Services: ~enable (std_srvs/SetBool): start or stop driving (stopping publishes a zero command).
     """
 
-    def __init__(self, reward):
+    def __init__(self, reward, config: RewardControllerConfig):
         self.reward, self.lock = reward, threading.Lock()
-        self.frame = rospy.get_param("~frame", "odom")
-        self.tolerance = float(rospy.get_param("~goal_tolerance", 0.25))
-        self.obstacle_radius = float(rospy.get_param("~obstacle_radius", 0.25))
-        self.enabled = bool(rospy.get_param("~enabled", True))
-        limits = UnicycleLimits(**{k: float(rospy.get_param(f"~{k}", getattr(UnicycleLimits, k)))
-                                   for k in ("v_max", "w_max", "a_max", "alpha_max")})
-        self.options = {"horizon": int(rospy.get_param("~horizon", 20)),
-                        "plan_dt": float(rospy.get_param("~plan_dt", 0.2)),
-                        "terminal": float(rospy.get_param("~terminal", 10.0)),
-                        "max_iter": int(rospy.get_param("~max_iter", 15))}
-        self.controller = RecedingHorizonController(reward, Unicycle(0.1, limits), **self.options)
+        self.config = config
+        self.frame = config.frame
+        self.tolerance = config.goal_tolerance
+        self.obstacle_radius = config.obstacle_radius
+        self.enabled = config.enabled
+        self.options = config.controller_options()
+        self.controller = RecedingHorizonController(reward, Unicycle(0.1, config.limits()), **self.options)
         self.state = self.goal = self.obstacle = self.scenario = self.episode_time = None
+        self.cmd = self.plan = self.cycle = self.timer = None
+
+    def setup(self) -> "RewardControllerNode":
+        """Publishers, subscribers, the ~enable service and the control timer."""
         self.cmd = rospy.Publisher("cmd_vel", Twist, queue_size=5)
         self.plan = rospy.Publisher("~plan", Path, queue_size=2)
         self.cycle = rospy.Publisher("~cycle_time", Float64, queue_size=10)
@@ -59,7 +63,8 @@ class RewardControllerNode:
         rospy.Subscriber("scenario", String, self.on_scenario, queue_size=1)
         rospy.Subscriber("sim_time", TimeReference, self.on_time, queue_size=1)
         rospy.Service("~enable", SetBool, self.on_enable)
-        self.timer = rospy.Timer(rospy.Duration(1.0 / float(rospy.get_param("~rate", 10.0))), self.tick)
+        self.timer = rospy.Timer(rospy.Duration(1.0 / self.config.rate), self.tick)
+        return self
 
     def on_odom(self, msg):
         with self.lock:
@@ -78,7 +83,7 @@ class RewardControllerNode:
     def on_scenario(self, msg):
         try:
             scenario = scenario_from_yaml(msg.data)
-        except SimError as err:
+        except (TaskError, ModelError) as err:
             rospy.logwarn(f"reward_controller: ignored scenario: {err}")
             return
         with self.lock:
@@ -140,3 +145,16 @@ class RewardControllerNode:
             q.x, q.y, q.z, q.w = yaw_to_quaternion(yaw)
             path.poses.append(pose)
         self.plan.publish(path)
+
+
+def single_threaded_blas() -> None:
+    """Small matrices: BLAS threads only contend with other processes (10x slower under load)."""
+    threadpool_limits(1)
+
+
+def start() -> RewardControllerNode:
+    """The node's start-up: ~parameters, the reward file (RewardFileError when missing or
+    malformed), the controller, ROS wiring."""
+    single_threaded_blas()
+    config = read_config(RewardControllerConfig)
+    return RewardControllerNode(load_reward(config.reward_file), config).setup()

@@ -1,7 +1,7 @@
 """DemoRecorderNode: records demonstrations from the robot's topics into bags and the database."""
-import os
 import threading
 from pathlib import Path
+from typing import Optional
 
 import rospy
 from geometry_msgs.msg import Twist, TwistStamped
@@ -13,17 +13,29 @@ from std_srvs.srv import Trigger, TriggerResponse
 from lfd_controller import ros_demos
 from lfd_controller.errors import DemonstrationError
 from lfd_controller.msg import Demonstration as DemonstrationMsg
+from lfd_controller.params import ROS_HOME_PREFIX, DemoRecorderConfig
 from lfd_controller.recording import DemoBuilder, SampleMatcher
-from lfd_controller.ros_common import odom_state
-from robot_sim.errors import SimError
-from robot_sim.scenarios import scenario_from_yaml
+from robot_common.errors import ModelError, TaskError
+from robot_common.ros_node import odom_state, read_config, ros_home
+from robot_common.tasks import scenario_from_yaml
+from ros_mongo import StoreError, open_store
+
+
+def resolve_bag_dir(value: str) -> Optional[Path]:
+    """The bag folder of ~bag_dir: None for "" (no bags); a leading $ROS_HOME is ros_home()."""
+    if not value:
+        return None
+    if value == ROS_HOME_PREFIX or value.startswith(ROS_HOME_PREFIX + "/"):
+        value = str(ros_home()) + value[len(ROS_HOME_PREFIX):]
+    return Path(value).expanduser()
 
 
 class DemoRecorderNode:
     """Records one demonstration between ~start and ~stop.
 
-    Parameters (defaults in config/demo_recorder.yaml):
-      ~bag_dir (str, "$ROS_HOME/lfd_demos"): one bag per demonstration ("" = no bags).
+    Parameters (lfd_controller.params.DemoRecorderConfig; config/demo_recorder.yaml):
+      ~bag_dir (str, "$ROS_HOME/lfd_demos"): one bag per demonstration ("" = no bags; a leading
+      $ROS_HOME is the ROS_HOME environment variable or ~/.ros).
       ~db_url (str, ""): ros_mongo store URL (CouchDB or mongodb://...; "" = no database).
       ~source (str, "joystick"): who demonstrates (stored with the demo, used as a tag).
       ~session_id (str, ""): stored with each demo in the database, so learning can take one
@@ -37,36 +49,39 @@ class DemoRecorderNode:
     Services: ~start, ~stop (std_srvs/Trigger; stop answers with where the demo was stored).
     """
 
-    def __init__(self):
+    def __init__(self, config: DemoRecorderConfig):
         self.lock = threading.Lock()
-        self.builder = DemoBuilder(int(rospy.get_param("~min_steps", 5)))
+        self.builder = DemoBuilder(config.min_steps)
         self.matcher = SampleMatcher()
-        bag_dir = rospy.get_param("~bag_dir", os.path.join(os.environ.get("ROS_HOME", "~/.ros"), "lfd_demos"))
-        self.bag_dir = Path(bag_dir).expanduser() if bag_dir else None
-        self.db_url = rospy.get_param("~db_url", "")
-        self.source = rospy.get_param("~source", "joystick")
-        self.session_id = rospy.get_param("~session_id", "") or None
+        self.bag_dir = resolve_bag_dir(config.bag_dir)
+        self.db_url = config.db_url
+        self.source = config.source
+        self.session_id = config.session_id or None
+        self.exact = config.use_applied_cmd
         self.scenario, self.raw, self.count = None, [], 0
         self.latest_cmd, self.first_stamp = (0.0, 0.0), None
+        self.demos = self.recording = None
+
+    def setup(self) -> "DemoRecorderNode":
+        """Publishers, subscribers and services."""
         self.demos = rospy.Publisher("~demonstrations", DemonstrationMsg, queue_size=5, latch=True)
         self.recording = rospy.Publisher("~recording", Bool, queue_size=1, latch=True)
         self.recording.publish(Bool(False))
         rospy.Subscriber("scenario", String, self.on_scenario, queue_size=1)
         rospy.Subscriber("odom", Odometry, self.on_odom, queue_size=50)
-        if rospy.get_param("~use_applied_cmd", True):
+        if self.exact:
             rospy.Subscriber("cmd_vel_applied", TwistStamped, self.on_applied, queue_size=50)
             rospy.Subscriber("sim_time", TimeReference, self.on_time, queue_size=50)
-            self.exact = True
         else:
             rospy.Subscriber("cmd_vel", Twist, self.on_cmd, queue_size=50)
-            self.exact = False
         rospy.Service("~start", Trigger, self.on_start)
         rospy.Service("~stop", Trigger, self.on_stop)
+        return self
 
     def on_scenario(self, msg):
         try:
             scenario = scenario_from_yaml(msg.data)
-        except SimError as err:
+        except (TaskError, ModelError) as err:
             rospy.logwarn(f"demo_recorder: ignored scenario: {err}")
             return
         with self.lock:
@@ -142,8 +157,6 @@ class DemoRecorderNode:
                 ok = False
                 parts.append(f"bag NOT written: {err}")
         if self.db_url:
-            from ros_mongo import StoreError, open_store
-
             try:
                 with open_store(self.db_url) as store:
                     stored_id = ros_demos.store_demo(store, msg, session_id=self.session_id)
@@ -152,3 +165,8 @@ class DemoRecorderNode:
                 ok = False
                 parts.append(f"database NOT written: {err}")
         return ok, "; ".join(parts)
+
+
+def start() -> DemoRecorderNode:
+    """The node's start-up: ~parameters -> recorder -> ROS wiring (ConfigError on a bad one)."""
+    return DemoRecorderNode(read_config(DemoRecorderConfig)).setup()

@@ -6,16 +6,16 @@ from geometry_msgs.msg import Twist
 from sensor_msgs.msg import Joy
 from std_srvs.srv import Trigger
 
-from lfd_controller.teleop import JoyMapping, JoyTeleop
-
-PARAMS = ("axis_linear", "axis_angular", "scale_linear", "scale_angular", "deadzone", "enable_button",
-          "record_start_button", "record_stop_button")
+from lfd_controller.params import JoyTeleopConfig
+from lfd_controller.teleop import JoyTeleop
+from robot_common.ros_node import read_config
 
 
 class JoyTeleopNode:
     """Drives from a joystick while the dead-man button is held.
 
-    Parameters (defaults in config/joy_teleop.yaml; Xbox 360 pad under the joy driver):
+    Parameters (lfd_controller.params.JoyTeleopConfig; config/joy_teleop.yaml; Xbox 360 pad under
+    the joy driver):
       ~axis_linear (int, 1), ~axis_angular (int, 0), ~scale_linear (double, 0.5 m/s),
       ~scale_angular (double, 1.5 rad/s), ~deadzone (double, 0.05), ~enable_button (int, 4: LB),
       ~record_start_button (int, 0: A), ~record_stop_button (int, 1: B), ~recorder (str,
@@ -24,14 +24,17 @@ class JoyTeleopNode:
       enabled, one zero command on release.
     """
 
-    def __init__(self):
-        defaults = JoyMapping()
-        values = {name: rospy.get_param(f"~{name}", getattr(defaults, name)) for name in PARAMS}
-        self.teleop = JoyTeleop(JoyMapping(**values))
-        recorder = rospy.get_param("~recorder", "demo_recorder").rstrip("/")
+    def __init__(self, config: JoyTeleopConfig):
+        self.teleop = JoyTeleop(config.mapping())
+        recorder = config.recorder.rstrip("/")
         self.services = {"start": f"{recorder}/start", "stop": f"{recorder}/stop"}
+        self.cmd = None
+
+    def setup(self) -> "JoyTeleopNode":
+        """Publishers and subscribers."""
         self.cmd = rospy.Publisher("cmd_vel", Twist, queue_size=5)
         rospy.Subscriber("joy", Joy, self.on_joy, queue_size=5)
+        return self
 
     def on_joy(self, msg: Joy) -> None:
         command, events = self.teleop.update(msg.axes, msg.buttons)
@@ -50,3 +53,8 @@ class JoyTeleopNode:
             log(f"joy_teleop: {service}: {response.message}")
         except (rospy.ROSException, rospy.ServiceException) as err:
             rospy.logwarn(f"joy_teleop: {service} failed: {err}")
+
+
+def start() -> JoyTeleopNode:
+    """The node's start-up: ~parameters -> core -> ROS wiring (ConfigError, LfdError on bad ones)."""
+    return JoyTeleopNode(read_config(JoyTeleopConfig)).setup()

@@ -17,12 +17,13 @@ landmarks (water_fountain, vending_machines, ...) stand in the halls. Everything
 `seed`.
 """
 import json
+import os
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from robot_sim.maps import FREE, OCCUPIED, GridMap
+from robot_common.maps import FREE, OCCUPIED, GridMap, load_map
 
 Box = Tuple[float, float, float, float]  # x0, y0, x1, y1
 
@@ -190,3 +191,16 @@ def _place_objects(area: Area, contents: Sequence[Tuple[str, int]],
         raise ValueError(f"room {area.name} ({area.label}) too small for {len(wanted)} objects")
     return [PlacedObject(name, round(float(slots[i][0]), 3), round(float(slots[i][1]), 3),
                          OBJECT_SIZES[name], area.name) for name, i in zip(wanted, order)]
+
+
+def building_or_map(map_yaml: str, seed: int) -> Tuple[GridMap, Optional[Building]]:
+    """The map a simulator node runs on: a map_server file (`map_yaml`, ~ expanded) or, when
+    `map_yaml` is empty, the generated building of `seed`.
+
+    Returns (grid, building); `building` is None for a map file (no known areas). A map file
+    that cannot be read raises robot_common's MapError.
+    """
+    if map_yaml:
+        return load_map(os.path.expanduser(map_yaml)), None
+    building = generate_building(seed)
+    return building.grid, building

@@ -11,16 +11,22 @@ so learners can be scored against the truth they did not produce.
     dets = simulate_detections(scene, mean_detections=20, noise_std=0.1, clutter_fraction=0.1,
                                random_state=2)
     building_scene(generate_building(0))   # the generated building's objects as a scene
+
+`building_detections(config)` and `place_sightings(building, config)` are what the
+object_detection_sim node publishes for its `DetectionSimConfig`, so that anyone holding the same
+parameters (the demo, tests) knows the truth behind its messages.
 """
 from dataclasses import dataclass
 from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from robot_sim.building import Building, generate_building
+from robot_sim.configs import DetectionSimConfig
 from robot_sim.errors import SimError
 
 __all__ = ["SceneObject", "Detections", "random_scene", "building_scene", "simulate_detections",
-           "scene_bounds"]
+           "scene_bounds", "building_detections", "place_sightings"]
 
 Bounds = Sequence[Tuple[float, float]]
 
@@ -169,3 +175,20 @@ def _size(obj: SceneObject, dim: int) -> np.ndarray:
     size = np.zeros(dim)
     size[:min(dim, len(obj.size))] = obj.size[:dim]
     return size
+
+
+def building_detections(config: DetectionSimConfig) -> Tuple[Building, Detections]:
+    """The generated building of `config.seed` and object_detection_sim's detections of it."""
+    building = generate_building(config.seed)
+    detections = simulate_detections(building_scene(building), mean_detections=config.mean_detections,
+                                     noise_std=config.noise_std, clutter_fraction=config.clutter_fraction,
+                                     extent_spread=config.extent_spread, confidence=(0.6, 1.0),
+                                     random_state=config.random_seed)
+    return building, detections
+
+
+def place_sightings(building: Building, config: DetectionSimConfig) -> List[Tuple[str, np.ndarray]]:
+    """(label, noisy x/y) sightings of every labelled place, `config.place_detections` each."""
+    rng = np.random.default_rng(config.random_seed + 1)
+    return [(name, np.array(xy) + rng.normal(0, config.noise_std, 2))
+            for name, xy in sorted(building.labels.items()) for _ in range(config.place_detections)]

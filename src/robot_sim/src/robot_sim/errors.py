@@ -1,9 +1,5 @@
-"""Errors of the robot_sim package."""
+"""Errors of the robot_sim package (map, task and model errors are robot_common's)."""
 
 
 class SimError(RuntimeError):
     """Base error of the simulators."""
-
-
-class MapError(SimError):
-    """A map file or map array is missing, unreadable or malformed."""

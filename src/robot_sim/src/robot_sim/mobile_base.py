@@ -10,8 +10,8 @@ from typing import List, Sequence, Tuple
 
 import numpy as np
 
+from robot_common.maps import GridMap, raycast
 from robot_sim.building import Building
-from robot_sim.maps import GridMap, raycast
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,6 @@
 """Real ROS and database processes for tests, demos and benchmarks (no mocks)."""
 from ros_harness.errors import HarnessError, ProcessDied
+from ros_harness.launching import LaunchSet
 from ros_harness.processes import (
     ManagedProcess,
     MongoWireServer,
@@ -15,6 +16,7 @@ from ros_harness.processes import (
 __all__ = [
     "HarnessError",
     "ProcessDied",
+    "LaunchSet",
     "ManagedProcess",
     "MongoWireServer",
     "PouchDBServer",

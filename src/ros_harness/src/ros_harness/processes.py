@@ -1,10 +1,10 @@
 """Start and stop real ROS and database processes, and wait on conditions instead of sleeping.
 
+The database servers' command lines come from robot_common.db_servers (written there only).
 Everything here is started in its own process session and stopped by process id (never by name),
 with its output in a log file whose tail is quoted when something goes wrong.
 """
 import os
-import shutil
 import signal
 import socket
 import subprocess
@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Callable, Dict, List, Mapping, Optional, Sequence
 from xml.sax.saxutils import quoteattr
 
+from robot_common.db_servers import couchdb_server_command, mongodb_server_command
 from ros_harness.errors import HarnessError, ProcessDied
 
 __all__ = [
@@ -329,11 +330,12 @@ def _xml_text(text: str) -> str:
     return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
 
 
-def _which(env_var: str, program: str, hint: str) -> str:
-    path = os.environ.get(env_var) or shutil.which(program)
-    if not path or not Path(path).exists():
-        raise HarnessError(f"{program} not found (set {env_var} or {hint})")
-    return path
+def _server_command(build: Callable[..., List[str]], **options) -> List[str]:
+    """A database server's command line from robot_common.db_servers (the one place it is written)."""
+    try:
+        return build(**options)
+    except (OSError, ValueError) as err:
+        raise HarnessError(str(err)) from err
 
 
 class PouchDBServer:
@@ -350,17 +352,11 @@ class PouchDBServer:
         self.url = f"http://127.0.0.1:{self.port}"
         self.process: Optional[ManagedProcess] = None
 
-    def _argv(self) -> List[str]:
-        binary = _which("POUCHDB_SERVER_BIN", "pouchdb-server", "run scripts/setup.sh")
-        # Without --unhandled-rejections=warn one bad request can kill the server (DATABASES.md).
-        argv = ["node", "--unhandled-rejections=warn", binary, "-o", "127.0.0.1",
-                "-p", str(self.port), "-d", str(self.data_dir),
-                "-c", str(self.data_dir / "config.json"), "-n"]
-        return argv + (["-m"] if self.in_memory else [])
-
     def start(self, timeout: float = 30.0) -> "PouchDBServer":
+        argv = _server_command(couchdb_server_command, port=self.port, data_dir=self.data_dir,
+                               in_memory=self.in_memory)
         self.data_dir.mkdir(parents=True, exist_ok=True)
-        self.process = ManagedProcess(self._argv(), name=f"pouchdb-server :{self.port}",
+        self.process = ManagedProcess(argv, name=f"pouchdb-server :{self.port}",
                                       log_path=self.data_dir / "server.log",
                                       cwd=self.data_dir).start()
         wait_until(self._ready, timeout, what=f"pouchdb-server on port {self.port}",
@@ -405,11 +401,8 @@ class MongoWireServer:
         self.process: Optional[ManagedProcess] = None
 
     def start(self, timeout: float = 30.0) -> "MongoWireServer":
+        argv = _server_command(mongodb_server_command, port=self.port, data_dir=self.data_dir)
         self.data_dir.mkdir(parents=True, exist_ok=True)
-        binary = _which("NX27017_BIN", "nx-27017", "run scripts/setup.sh")
-        argv = [binary, "--data-dir", str(self.data_dir), "--host", "127.0.0.1",
-                "-p", str(self.port), "--pid-file", str(self.data_dir / "nx-27017.pid"),
-                "--log-file", str(self.data_dir / "nx-27017.log")]
         self.process = ManagedProcess(argv, name=f"nx-27017 :{self.port}",
                                       log_path=self.data_dir / "server.log").start()
         wait_until(lambda: _port_open(self.port), timeout, what=f"nx-27017 on port {self.port}",

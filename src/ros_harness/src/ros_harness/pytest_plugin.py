@@ -3,9 +3,10 @@
 Fixtures (all tear down what they started, by process id):
 - `roscore` (session): a real roscore on a free port; ROS_MASTER_URI etc. set in os.environ.
 - `rospy_node` (session): this test process as a rospy node (for publishing and calling services).
-- `roslaunch` (function): `roslaunch("pkg", "file.launch", arg=value)`, `roslaunch(path)` or
-  `roslaunch.node("pkg", "exe", params={...}, remap={...})`; returns a started `RosLaunch` whose
-  `wait_for_topics/services/nodes` wait on the master with a timeout.
+- `roslaunch` (function): a `ros_harness.launching.LaunchSet`: `roslaunch("pkg", "file.launch",
+  arg=value)`, `roslaunch(path)` or `roslaunch.node("pkg", "exe", params={...}, remap={...})`;
+  returns a started `RosLaunch` whose `wait_for_topics/services/nodes` wait on the master with a
+  timeout. At the test's end every launch stops and the parameters they set are deleted.
 - `couchdb_server`, `mongodb_server` (session): shared real database servers;
   `couchdb_url`, `mongodb_url` (function): a fresh database on them;
   `db_url` (function, parametrised): the same test against both backends.
@@ -17,21 +18,12 @@ Markers: `ros` (needs roscore), `db` (needs a database server), `rviz`, `slow`.
 """
 import os
 import uuid
-import xmlrpc.client
 from pathlib import Path
-from typing import List
 
 import pytest
 
-from ros_harness.errors import HarnessError
-from ros_harness.processes import (
-    ManagedProcess,
-    MongoWireServer,
-    PouchDBServer,
-    RosCore,
-    RosLaunch,
-    wait_until,
-)
+from ros_harness.launching import LaunchSet
+from ros_harness.processes import ManagedProcess, MongoWireServer, PouchDBServer, RosCore, wait_until
 
 MARKERS = {
     "ros": "starts a real roscore and ROS nodes",
@@ -84,50 +76,11 @@ def rospy_node(roscore):
     rospy.signal_shutdown("tests finished")
 
 
-class Launcher:
-    """Starts launches for one test and stops them all at its end."""
-
-    def __init__(self, core: RosCore, log_dir: Path):
-        self.core = core
-        self.log_dir = log_dir
-        self.launched: List[RosLaunch] = []
-        self.params_before = set(_param_names(core.uri))
-
-    def __call__(self, package_or_path: str, launch_file: str = "", **args) -> RosLaunch:
-        target = [package_or_path, launch_file] if launch_file else [package_or_path]
-        return self._start(RosLaunch(target, master_uri=self.core.uri, log_dir=self.log_dir,
-                                     args=args, env=self.core.env()))
-
-    def node(self, package: str, executable: str, **options) -> RosLaunch:
-        return self._start(RosLaunch.node(package, executable, master_uri=self.core.uri,
-                                          log_dir=self.log_dir, env=self.core.env(), **options))
-
-    def _start(self, launch: RosLaunch) -> RosLaunch:
-        self.launched.append(launch)
-        return launch.start()
-
-    def stop_all(self) -> None:
-        """Stop every launch, then delete the parameters they set: the master outlives the test,
-        and a node started later under the same name must not read this test's private params."""
-        for launch in reversed(self.launched):
-            launch.stop()
-        master = xmlrpc.client.ServerProxy(self.core.uri)
-        for name in set(_param_names(self.core.uri)) - self.params_before:
-            master.deleteParam("/pytest_launcher", name)
-
-
-def _param_names(master_uri: str) -> List[str]:
-    code, message, names = xmlrpc.client.ServerProxy(master_uri).getParamNames("/pytest_launcher")
-    if code != 1:
-        raise HarnessError(f"cannot list parameters of {master_uri}: {message}")
-    return names
-
-
 @pytest.fixture
 def roslaunch(roscore, tmp_path):
-    launcher = Launcher(roscore, tmp_path / "launch")
-    yield launcher
-    launcher.stop_all()
+    launches = LaunchSet(roscore, tmp_path / "launch")
+    yield launches
+    launches.stop_all()
 
 
 @pytest.fixture(scope="session")

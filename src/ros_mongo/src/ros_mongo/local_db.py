@@ -1,45 +1,31 @@
-"""A local database server process (pouchdb-server or nx-27017) for demos and trials."""
+"""A local database server in the foreground (the ros_mongo_local_db executable; no ROS here).
+
+The command lines come from robot_common.db_servers, which ros_harness uses too.
+"""
 import argparse
-import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
 from pathlib import Path
 from typing import List, Optional
 
-__all__ = ["server_command", "main"]
+from robot_common.db_servers import KINDS, server_command
+
+__all__ = ["main"]
 
 
-def server_command(kind: str, host: str, port: int, data_dir: Path) -> List[str]:
-    """The command line that runs a local server of `kind` ("couchdb" or "mongodb")."""
-    if kind == "couchdb":
-        binary = os.environ.get("POUCHDB_SERVER_BIN") or shutil.which("pouchdb-server")
-        if not binary or not Path(binary).exists():
-            raise FileNotFoundError("pouchdb-server not found: set POUCHDB_SERVER_BIN or install it "
-                                    "(npm install pouchdb-server@4.2.0)")
-        # --unhandled-rejections=warn: one bad request must not end the server
-        return ["node", "--unhandled-rejections=warn", binary, "-o", host, "-p", str(port),
-                "-d", str(data_dir), "-c", str(data_dir / "config.json"), "-n"]
-    if kind == "mongodb":
-        binary = shutil.which("nx-27017")
-        if not binary:
-            raise FileNotFoundError("nx-27017 not found (pip install nx-27017)")
-        return [binary, "--data-dir", str(data_dir), "--host", host, "-p", str(port),
-                "--pid-file", str(data_dir / "nx-27017.pid"), "--log-file", str(data_dir / "nx-27017.log")]
-    raise ValueError(f"unknown database kind {kind!r}: couchdb or mongodb")
-
-
-def main(argv: Optional[List[str]] = None) -> int:
+def main(argv: Optional[List[str]] = None, *, default_data_dir: Path) -> int:
+    """Run one server until SIGINT/SIGTERM, then stop it; 1 with one "ERROR: ..." line when it
+    cannot start. `default_data_dir` is the --data-dir default (the executable passes
+    $ROS_HOME/ros_mongo/db)."""
     argv = sys.argv[1:] if argv is None else argv
     argv = [a for a in argv if not re.match(r"^__\w+:=", a)]  # roslaunch's __name:= and __log:=
-    parser = argparse.ArgumentParser(prog="ros_mongo_local_db", description=__doc__)
-    parser.add_argument("--kind", choices=["couchdb", "mongodb"], default="couchdb")
+    parser = argparse.ArgumentParser(prog="ros_mongo_local_db", description=__doc__.splitlines()[0])
+    parser.add_argument("--kind", choices=KINDS, default="couchdb")
     parser.add_argument("--host", default="127.0.0.1")
     parser.add_argument("--port", type=int, default=5984)
-    parser.add_argument("--data-dir", type=Path,
-                        default=Path(os.environ.get("ROS_HOME", Path.home() / ".ros")) / "ros_mongo" / "db")
+    parser.add_argument("--data-dir", type=Path, default=default_data_dir)
     args = parser.parse_args(argv)
     try:
         args.data_dir.mkdir(parents=True, exist_ok=True)

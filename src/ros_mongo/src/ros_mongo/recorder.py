@@ -21,7 +21,7 @@ from typing import Deque, Dict, List, Optional, Sequence, Tuple
 
 import genpy
 
-from ros_mongo import msgtypes
+import ros_mongo.msgtypes as msgtypes
 from ros_mongo.errors import SpoolError, StoreError, StoreUnavailable, UnknownTypeError
 from ros_mongo.records import MessageRecord, TopicInfo, make_record, new_message_id
 from ros_mongo.spool import Spool

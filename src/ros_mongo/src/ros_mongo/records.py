@@ -8,8 +8,8 @@ from typing import Any, Callable, Dict, List, Optional, Sequence
 
 import genpy
 
-from ros_mongo import msgtypes
-from ros_mongo.errors import StoreError, UnknownTypeError
+import ros_mongo.msgtypes as msgtypes
+from ros_mongo.errors import UnknownTypeError
 
 __all__ = ["TopicInfo", "MessageRecord", "StoredMessage", "make_record", "new_message_id",
            "split_time"]
@@ -95,7 +95,7 @@ def make_record(topic: str, msg_class: type, raw: bytes, *, receive: Optional[ge
 
 
 class StoredMessage:
-    """A message read back from a store.
+    """A message read back from a store (built by `documents.stored_message` from its document).
 
     Attributes: id, topic, msg_type, md5sum, receive_time (float s), receive_stamp (genpy.Time,
     exact), header_stamp (float s or None), tags, session_id, robot_id, fields (decoded, as
@@ -106,22 +106,22 @@ class StoredMessage:
     __slots__ = ("id", "topic", "msg_type", "md5sum", "receive_stamp", "header_stamp", "tags",
                  "session_id", "robot_id", "fields", "size", "_raw", "_load_raw", "_resolve")
 
-    def __init__(self, doc: Dict[str, Any], raw: Optional[bytes],
-                 load_raw: Callable[[str], bytes], resolve: Callable[[str, str], type]):
-        try:
-            self.id = str(doc["_id"])
-            self.topic = doc["topic"]
-            self.msg_type = doc["type"]
-            self.md5sum = doc["md5sum"]
-            self.receive_stamp = genpy.Time(int(doc["receive_secs"]), int(doc["receive_nsecs"]))
-        except (KeyError, TypeError, ValueError) as err:
-            raise StoreError(f"document {doc.get('_id')!r} is not a stored message: {err!r}") from err
-        self.header_stamp = doc.get("header_stamp")
-        self.tags = list(doc.get("tags") or [])
-        self.session_id = doc.get("session_id")
-        self.robot_id = doc.get("robot_id")
-        self.fields = doc.get("msg")
-        self.size = int(doc.get("size", len(raw) if raw is not None else 0))
+    def __init__(self, *, id: str, topic: str, msg_type: str, md5sum: str,
+                 receive_stamp: genpy.Time, header_stamp: Optional[float], tags: Sequence[str],
+                 session_id: Optional[str], robot_id: Optional[str], fields: Optional[Dict[str, Any]],
+                 size: int, raw: Optional[bytes], load_raw: Callable[[str], bytes],
+                 resolve: Callable[[str, str], type]):
+        self.id = id
+        self.topic = topic
+        self.msg_type = msg_type
+        self.md5sum = md5sum
+        self.receive_stamp = receive_stamp
+        self.header_stamp = header_stamp
+        self.tags = list(tags)
+        self.session_id = session_id
+        self.robot_id = robot_id
+        self.fields = fields
+        self.size = size
         self._raw = raw
         self._load_raw = load_raw
         self._resolve = resolve

@@ -1,104 +1,112 @@
-"""The ros_mongo_server node: ROS topics (any type) into the recorder core."""
+"""The ros_mongo_server node: ROS topics (any type) into the recorder core.
+
+Its parameters are `RecorderConfig` (config/ros_mongo_server.yaml is generated from it).
+"""
 import re
 import socket
 import time
+from dataclasses import dataclass
 from typing import Dict, List, Optional
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from std_msgs.msg import Header
 
+from robot_common.errors import ConfigError
+from robot_common.params import NodeConfig, param
+from robot_common.ros_node import read_config, ros_home, run_node
 from ros_mongo.errors import StoreError
 from ros_mongo.recorder import Recorder
-from ros_mongo.ros_common import ConfigError, read_params, ros_home, route_logging
 from ros_mongo.spool import Spool
 from ros_mongo.store import open_store
 
-__all__ = ["RecorderNode", "DEFAULTS", "main"]
+__all__ = ["RecorderNode", "RecorderConfig", "ORIGINAL_TOPICS", "main"]
 
 ORIGINAL_TOPICS = ["/camera/rgb/image_raw", "/joint_states", "/scan", "/odom"]
-DEFAULTS = {
-    "db_url": "http://127.0.0.1:5984/robot_data",
-    "topics": list(ORIGINAL_TOPICS),
-    "include": [],
-    "exclude": ["^/rosout", "_mongo$", "^/diagnostics", "^/clock$"],
-    "discovery_period": 1.0,
-    "batch_size": 500,
-    "batch_period": 0.2,
-    "max_queue_mb": 1024.0,
-    "retry_period": 1.0,
-    "writers": 2,
-    "spool_path": "",
-    "spool_fsync": False,
-    "session_id": "",
-    "robot_id": "",
-    "tags": [],
-    "topic_tags": {"/camera/rgb/image_raw": ["image"], "/joint_states": ["joint_states"],
-                   "/scan": ["lidar"], "/odom": ["odom"]},
-    "blob_threshold": 262144,
-    "db_timeout": 5.0,
-    "diagnostics_period": 1.0,
-    "log_period": 10.0,
-    "shutdown_timeout": 10.0,
-}
+ORIGINAL_TAGS = {"/camera/rgb/image_raw": ["image"], "/joint_states": ["joint_states"],
+                 "/scan": ["lidar"], "/odom": ["odom"]}
+
+
+@dataclass
+class RecorderConfig(NodeConfig):
+    """The ros_mongo_server node's parameters."""
+
+    db_url: str = param("http://127.0.0.1:5984/robot_data",
+                        "http(s):// CouchDB or mongodb:// MongoDB database URL")
+    topics: List[str] = param(ORIGINAL_TOPICS, "topics always recorded (the four original ones)")
+    include: List[str] = param([], "regular expressions: also record published topics whose name "
+                                   "matches one")
+    exclude: List[str] = param(["^/rosout", "_mongo$", "^/diagnostics", "^/clock$"],
+                               "regular expressions: never record topics whose name matches one")
+    discovery_period: float = param(1.0, "seconds between looks for new publishers (with include)")
+    batch_size: int = param(500, "messages per bulk write, at most")
+    batch_period: float = param(0.2, "seconds a message waits for its bulk write, at most")
+    max_queue_mb: float = param(1024.0, "received data waiting in memory (MB); beyond it messages go "
+                                        "to the spool undecoded, so a slow database costs no messages")
+    retry_period: float = param(1.0, "seconds between probes while the database is unreachable")
+    writers: int = param(2, "writer threads (one encodes while another waits for the database)")
+    spool_path: str = param("", "the spool file for database outages; empty: "
+                                "$ROS_HOME/ros_mongo/<node>.spool")
+    spool_fsync: bool = param(False, "fsync every spool append (survives power loss, not only a crash)")
+    session_id: str = param("", "session id on every message; empty: <start time>-<node>")
+    robot_id: str = param("", "robot id on every message; empty: the host name")
+    tags: List[str] = param([], "tags on every message")
+    topic_tags: Dict[str, List[str]] = param(ORIGINAL_TAGS, "tags per topic (the original "
+                                                            "image/joint_states/lidar/odom)")
+    blob_threshold: int = param(262144, "serialized messages larger than this (bytes) go to "
+                                        "attachments / GridFS")
+    db_timeout: float = param(5.0, "seconds a database request may take")
+    diagnostics_period: float = param(1.0, "seconds between /diagnostics messages")
+    log_period: float = param(10.0, "seconds between count lines in the log (when they changed)")
+    shutdown_timeout: float = param(10.0, "seconds to flush and drain on shutdown")
+
+    def check(self) -> None:
+        _patterns("include", self.include)
+        _patterns("exclude", self.exclude)
 
 
 class RecorderNode:
     """ros_mongo_server: records topics of any type into CouchDB (default) or MongoDB.
 
-    Parameters (defaults in config/ros_mongo_server.yaml):
-        ~db_url (str, http://127.0.0.1:5984/robot_data): http(s):// CouchDB or mongodb:// MongoDB.
-        ~topics (list, the four original topics): always recorded.
-        ~include (list of regex, []): also record published topics whose name matches one.
-        ~exclude (list of regex, [^/rosout, _mongo$, ^/diagnostics, ^/clock$]): never these.
-        ~discovery_period (1.0 s): how often new publishers are looked for.
-        ~batch_size (500), ~batch_period (0.2 s): a bulk write when either is reached.
-        ~max_queue_mb (1024): received data waiting in memory; beyond it messages go to the spool
-            (undecoded; decoded when drained), so a slow database costs no messages.
-        ~retry_period (1.0 s): probe interval while the database is unreachable.
-        ~writers (2): writer threads (one encodes while another waits for the database).
-        ~spool_path (str, $ROS_HOME/ros_mongo/<node>.spool): the spool for database outages.
-        ~spool_fsync (false): fsync every spool append (survives power loss, not only a crash).
-        ~session_id (str, generated), ~robot_id (str, host name), ~tags (list, []): on every message.
-        ~topic_tags (dict, the original tags image/joint_states/lidar/odom): tags per topic.
-        ~blob_threshold (262144 bytes): larger messages go to attachments / GridFS.
-        ~db_timeout (5.0 s), ~diagnostics_period (1.0 s), ~log_period (10.0 s),
-        ~shutdown_timeout (10.0 s): time to flush and drain on shutdown.
+    Parameters: `RecorderConfig` (each with its default and meaning; the launch file loads them
+    from config/ros_mongo_server.yaml). The recorded topics are ~topics, plus published topics
+    matching ~include, minus those matching ~exclude; ~max_queue_mb bounds memory, the spool at
+    ~spool_path takes what does not fit or cannot be written.
     Subscribes: the recorded topics (rospy.AnyMsg: exact bytes, any type).
     Publishes: /diagnostics (diagnostic_msgs/DiagnosticArray): received, stored, dropped, rejected,
         spooled, spool_pending, queued, topics.
     """
 
-    def __init__(self, params: Dict):
-        self.params = params
-        self.include = _patterns("include", params["include"])
-        self.exclude = _patterns("exclude", params["exclude"])
+    def __init__(self, config: RecorderConfig):
+        self.config = config
+        self.include = _patterns("include", config.include)
+        self.exclude = _patterns("exclude", config.exclude)
         node = rospy.get_name().strip("/").replace("/", "_")
-        self.session_id = params["session_id"] or time.strftime("%Y%m%dT%H%M%S") + f"-{node}"
-        self.robot_id = params["robot_id"] or socket.gethostname()
-        self.store = open_store(params["db_url"], connect=False, timeout=params["db_timeout"],
-                                blob_threshold=params["blob_threshold"])
-        spool_path = params["spool_path"] or str(ros_home() / "ros_mongo" / f"{node}.spool")
-        spool = Spool(spool_path, fsync=params["spool_fsync"]).open()
+        self.session_id = config.session_id or time.strftime("%Y%m%dT%H%M%S") + f"-{node}"
+        self.robot_id = config.robot_id or socket.gethostname()
+        self.store = open_store(config.db_url, connect=False, timeout=config.db_timeout,
+                                blob_threshold=config.blob_threshold)
+        spool_path = config.spool_path or str(ros_home() / "ros_mongo" / f"{node}.spool")
+        spool = Spool(spool_path, fsync=config.spool_fsync).open()
         self.recorder = Recorder(
-            self.store, spool, batch_size=params["batch_size"],
-            batch_period=params["batch_period"], max_queue_bytes=int(params["max_queue_mb"] * 2 ** 20),
-            retry_period=params["retry_period"], writers=params["writers"], session_id=self.session_id,
-            robot_id=self.robot_id, tags=params["tags"], topic_tags=params["topic_tags"])
+            self.store, spool, batch_size=config.batch_size,
+            batch_period=config.batch_period, max_queue_bytes=int(config.max_queue_mb * 2 ** 20),
+            retry_period=config.retry_period, writers=config.writers, session_id=self.session_id,
+            robot_id=self.robot_id, tags=config.tags, topic_tags=config.topic_tags)
         self.subscribers: Dict[str, rospy.Subscriber] = {}
         self.topic_counts: Dict[str, int] = {}
         self._last_log: Optional[Dict[str, int]] = None
 
     def setup(self) -> "RecorderNode":
         self.recorder.start()
-        for topic in self.params["topics"]:
+        for topic in self.config.topics:
             self._subscribe(rospy.resolve_name(topic))
         self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         if self.include:
             self._discover(None)
-            rospy.Timer(rospy.Duration(self.params["discovery_period"]), self._discover)
-        rospy.Timer(rospy.Duration(self.params["diagnostics_period"]), self._publish_diagnostics)
-        rospy.Timer(rospy.Duration(self.params["log_period"]), self._log_counts)
+            rospy.Timer(rospy.Duration(self.config.discovery_period), self._discover)
+        rospy.Timer(rospy.Duration(self.config.diagnostics_period), self._publish_diagnostics)
+        rospy.Timer(rospy.Duration(self.config.log_period), self._log_counts)
         rospy.loginfo("recording %s into %s (session %s, robot %s, spool %s)", sorted(self.subscribers),
                       self.store.url, self.session_id, self.robot_id, self.recorder.spool.path)
         return self
@@ -151,7 +159,7 @@ class RecorderNode:
     def shutdown(self) -> None:
         for subscriber in self.subscribers.values():
             subscriber.unregister()
-        counts = self.recorder.stop(self.params["shutdown_timeout"])
+        counts = self.recorder.stop(self.config.shutdown_timeout)
         self.recorder.spool.close()
         self.store.close()
         rospy.loginfo("recorder stopped: %s", ", ".join(f"{k} {v}" for k, v in counts.items()))
@@ -164,14 +172,12 @@ def _patterns(name: str, values: List[str]) -> List["re.Pattern"]:
         raise ConfigError(f"~{name} holds a bad regular expression: {err}") from None
 
 
+def _start() -> RecorderNode:
+    node = RecorderNode(read_config(RecorderConfig)).setup()
+    rospy.on_shutdown(node.shutdown)
+    return node
+
+
 def main() -> int:
-    rospy.init_node("ros_mongo_server")
-    route_logging()
-    try:
-        node = RecorderNode(read_params(DEFAULTS)).setup()
-    except (ConfigError, StoreError, ValueError) as err:
-        rospy.logfatal(f"ros_mongo_server: {err}")
-        return 1
-    rospy.spin()
-    node.shutdown()
-    return 0
+    """The ros_mongo_server executable: exit status 1 with one line on a bad configuration."""
+    return run_node("ros_mongo_server", _start, loggers=("ros_mongo",), fatal=(StoreError, ValueError))

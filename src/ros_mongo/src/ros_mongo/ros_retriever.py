@@ -1,106 +1,106 @@
-"""The ros_mongo_retriever node: stored messages back onto ROS topics (exact bytes)."""
+"""The ros_mongo_retriever node: stored messages back onto ROS topics (exact bytes).
+
+Its parameters are `RetrieverConfig` (config/ros_mongo_retriever.yaml is generated from it).
+"""
 import sys
 import threading
 import time
 import warnings
-from typing import Dict, Tuple
+from dataclasses import dataclass
+from typing import Any, Dict, List, Tuple
 
 import rosgraph
 import rospy
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger, TriggerResponse
 
+from robot_common.errors import ConfigError
+from robot_common.params import NodeConfig, param
+from robot_common.ros_node import read_config, run_node
 from ros_mongo.errors import QueryError, StoreError
 from ros_mongo.query import Query, parse_query, query_from_mapping
 from ros_mongo.records import TopicInfo
 from ros_mongo.replay import Replayer, ReplayItem
-from ros_mongo.ros_common import ConfigError, read_params, route_logging
 from ros_mongo.srv import Count, CountResponse, Start, StartResponse
 from ros_mongo.store import open_store
 
-__all__ = ["RetrieverNode", "DEFAULTS", "main"]
+__all__ = ["RetrieverNode", "RetrieverConfig", "configured_query", "raw_class", "main"]
 
-DEFAULTS = {
-    "db_url": "http://127.0.0.1:5984/robot_data",
-    "query": "",
-    "topics": [],
-    "type": "",
-    "tags": [],
-    "session_id": "",
-    "robot_id": "",
-    "start_time": 0.0,
-    "end_time": 0.0,
-    "fields": {},
-    "output_suffix": "_mongo",
-    "rate": 1.0,
-    "start_offset": 0.0,
-    "duration": 0.0,
-    "loop": False,
-    "fixed_rate": 0.0,
-    "publish_clock": False,
-    "clock_rate": 100.0,
-    "autostart": True,
-    "start_delay": 1.0,
-    "prefetch": 100000,
-    "prefetch_mb": 1024.0,
-    "preroll_timeout": 15.0,
-    "queue_size": 100,
-    "sync_max_bytes": 16777216,
-    "lane_min_bytes": 65536,
-    "db_timeout": 10.0,
-}
+
+@dataclass
+class RetrieverConfig(NodeConfig):
+    """The ros_mongo_retriever node's parameters."""
+
+    db_url: str = param("http://127.0.0.1:5984/robot_data",
+                        "http(s):// CouchDB or mongodb:// MongoDB database URL")
+    query: str = param("", "YAML/JSON query mapping or the original '<key> <value>' form ('tags "
+                           "lidar'); its keys override the query parameters below")
+    topics: List[str] = param([], "query: only these topics (empty: all)")
+    type: str = param("", "query: only this message type (empty: any)")
+    tags: List[str] = param([], "query: only messages with all these tags")
+    session_id: str = param("", "query: only this session (empty: any)")
+    robot_id: str = param("", "query: only this robot (empty: any)")
+    start_time: float = param(0.0, "query: receive time from (seconds; 0.0: open)")
+    end_time: float = param(0.0, "query: receive time until (seconds; 0.0: open)")
+    fields: Dict[str, Any] = param({}, "query: conditions on decoded message fields")
+    output_suffix: str = param("_mongo", "/scan is replayed on /scan<output_suffix>")
+    rate: float = param(1.0, "speed factor of the recorded timing")
+    start_offset: float = param(0.0, "seconds of the recording skipped at its start")
+    duration: float = param(0.0, "seconds of the recording played (0.0: all)")
+    loop: bool = param(False, "play again from the start when done")
+    fixed_rate: float = param(0.0, "messages per second instead of the recorded timing (0.0: off)")
+    publish_clock: bool = param(False, "publish /clock with the recorded time")
+    clock_rate: float = param(100.0, "/clock messages per second")
+    autostart: bool = param(True, "start playing at launch")
+    start_delay: float = param(1.0, "longest wait (s) before playing for the subscribers the master "
+                                    "knows of to connect to the output topics")
+    prefetch: int = param(100000, "messages read ahead, at most (filled before playing)")
+    prefetch_mb: float = param(1024.0, "MB read ahead, at most")
+    preroll_timeout: float = param(15.0, "longest wait (s) for the read-ahead before playing")
+    queue_size: int = param(100, "outgoing queue per subscriber of topics above sync_max_bytes")
+    sync_max_bytes: int = param(16777216, "topics with larger messages are published through a queue; "
+                                          "smaller ones synchronously (exact timing)")
+    lane_min_bytes: int = param(65536, "messages this large are published by a thread of their "
+                                       "topic's own, so writing them does not delay other topics")
+    db_timeout: float = param(10.0, "seconds a database request may take")
+
+    def check(self) -> None:
+        configured_query(self)
 
 
 class RetrieverNode:
     """ros_mongo_retriever: replays stored messages onto `<topic><output_suffix>` topics.
 
-    Parameters (defaults in config/ros_mongo_retriever.yaml):
-        ~db_url (str, http://127.0.0.1:5984/robot_data): CouchDB http(s):// or mongodb://.
-        ~query (str, ""): YAML/JSON mapping or the original "<key> <value>" form ("tags lidar");
-            its keys override the parameters below.
-        ~topics (list, []), ~type (""), ~tags (list, []), ~session_id (""), ~robot_id (""),
-        ~start_time / ~end_time (0.0 = open, seconds), ~fields (dict, {}): the query.
-        ~output_suffix ("_mongo"): /scan is replayed on /scan_mongo (remap those names freely).
-        ~rate (1.0): speed factor of the recorded timing; ~fixed_rate (0.0): messages/s instead.
-        ~start_offset (0.0 s), ~duration (0.0 = all), ~loop (false).
-        ~publish_clock (false), ~clock_rate (100.0 Hz): publish /clock with the recorded time.
-        ~autostart (true): start at launch; ~start_delay (1.0 s): longest wait before playing for
-            the subscribers the master knows of to connect to the output topics.
-        ~prefetch (100000 messages), ~prefetch_mb (1024.0): read ahead at most this much; it is
-            filled before playing (at most ~preroll_timeout, 15.0 s), because loading while playing
-            competes for the processor and costs timing precision on a small machine.
-        ~sync_max_bytes (16777216), ~queue_size (100): topics whose messages are larger are published
-            through an outgoing queue of queue_size per subscriber, smaller ones synchronously (exact
-            timing; a subscriber that cannot keep up slows the replay down: lower this for one).
-        ~lane_min_bytes (65536): messages this large are published by a thread of their topic's own
-            at their due time, so writing them does not delay other topics.
-        ~db_timeout (10.0 s).
+    Parameters: `RetrieverConfig` (each with its default and meaning; the launch file loads them
+    from config/ros_mongo_retriever.yaml). Small messages are written synchronously by the player
+    (exact timing: a subscriber that cannot keep up slows the replay down); larger ones than
+    ~sync_max_bytes go through a queue of ~queue_size per subscriber.
     Publishes: <topic><output_suffix> for each stored topic the query can return (its stored type,
         md5sum, definition and latching; exact stored bytes); /clock (rosgraph_msgs/Clock) if asked.
     Services: ~count (ros_mongo/Count), ~start (ros_mongo/Start), ~stop (std_srvs/Trigger).
     """
 
-    def __init__(self, params: Dict):
-        self.params = params
-        self.query = _configured_query(params)
-        self.store = open_store(params["db_url"], connect=False, timeout=params["db_timeout"])
+    def __init__(self, config: RetrieverConfig):
+        self.config = config
+        self.query = configured_query(config)
+        self.store = open_store(config.db_url, connect=False, timeout=config.db_timeout)
         self.publishers: Dict[str, Tuple[TopicInfo, rospy.Publisher]] = {}
         self._lock = threading.Lock()
-        self.clock_pub = rospy.Publisher("/clock", Clock, queue_size=10) if params["publish_clock"] else None
+        self.clock_pub = rospy.Publisher("/clock", Clock, queue_size=10) if config.publish_clock else None
         self.replayer = Replayer(
             self.store, self._publish, clock=self._clock if self.clock_pub else None,
-            rate=params["rate"], start_offset=params["start_offset"], duration=params["duration"],
-            loop=params["loop"], fixed_rate=params["fixed_rate"],
-            clock_period=1.0 / params["clock_rate"], prefetch=params["prefetch"],
-            prefetch_mb=params["prefetch_mb"], preroll_timeout=params["preroll_timeout"],
-            lane_min_bytes=params["lane_min_bytes"])
+            rate=config.rate, start_offset=config.start_offset, duration=config.duration,
+            loop=config.loop, fixed_rate=config.fixed_rate,
+            clock_period=1.0 / config.clock_rate, prefetch=config.prefetch,
+            prefetch_mb=config.prefetch_mb, preroll_timeout=config.preroll_timeout,
+            lane_min_bytes=config.lane_min_bytes)
 
     def setup(self) -> "RetrieverNode":
         rospy.Service("~count", Count, self._count)
         rospy.Service("~start", Start, self._start)
         rospy.Service("~stop", Trigger, self._stop)
-        if self.params["autostart"]:
-            threading.Timer(self.params["start_delay"], self._autostart).start()
+        if self.config.autostart:
+            threading.Timer(self.config.start_delay, self._autostart).start()
         return self
 
     def _autostart(self) -> None:
@@ -112,7 +112,7 @@ class RetrieverNode:
             self._advertise(query)
         except StoreError as err:
             return False, f"cannot start replay: {err}"
-        self._wait_for_subscribers(self.params["start_delay"])
+        self._wait_for_subscribers(self.config.start_delay)
         self.replayer.start(query)
         outputs = sorted(p.resolved_name for _, p in self.publishers.values())
         return True, f"replaying {query.describe()} onto {outputs}"
@@ -131,12 +131,12 @@ class RetrieverNode:
                                                    limit=1, decoded=False)), None)
                 # small messages: written at once by the player (exact timing); large ones through
                 # a queue and a writer thread per subscriber (a slow subscriber does not hold up others)
-                queued = sample is not None and sample.size > self.params["sync_max_bytes"]
+                queued = sample is not None and sample.size > self.config.sync_max_bytes
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")  # rospy warns about synchronous publishers
-                    publisher = rospy.Publisher(info.topic + self.params["output_suffix"], raw_class(info),
+                    publisher = rospy.Publisher(info.topic + self.config.output_suffix, raw_class(info),
                                                 latch=info.latching,
-                                                queue_size=self.params["queue_size"] if queued else None)
+                                                queue_size=self.config.queue_size if queued else None)
                 self.publishers[info.topic] = (info, publisher)
 
     def _wait_for_subscribers(self, timeout: float) -> None:
@@ -202,14 +202,15 @@ def raw_class(info: TopicInfo) -> type:
         "_has_header": False, "__slots__": []})
 
 
-def _configured_query(params: Dict) -> Query:
-    mapping = {"topics": params["topics"], "type": params["type"], "tags": params["tags"],
-               "session_id": params["session_id"], "robot_id": params["robot_id"],
-               "start_time": params["start_time"] or None, "end_time": params["end_time"] or None,
-               "fields": params["fields"] or None}
+def configured_query(config: RetrieverConfig) -> Query:
+    """The query the parameters describe (~query's keys override the others; ConfigError)."""
+    mapping = {"topics": config.topics, "type": config.type, "tags": config.tags,
+               "session_id": config.session_id, "robot_id": config.robot_id,
+               "start_time": config.start_time or None, "end_time": config.end_time or None,
+               "fields": config.fields or None}
     try:
-        if params["query"].strip():
-            text_query = parse_query(params["query"])
+        if config.query.strip():
+            text_query = parse_query(config.query)
             mapping.update({k: v for k, v in _as_mapping(text_query).items() if v not in (None, [], {})})
         return query_from_mapping(mapping)
     except QueryError as err:
@@ -222,15 +223,13 @@ def _as_mapping(query: Query) -> Dict:
             "end_time": query.end_time, "fields": query.fields}
 
 
+def _start() -> RetrieverNode:
+    node = RetrieverNode(read_config(RetrieverConfig)).setup()
+    rospy.on_shutdown(node.shutdown)
+    return node
+
+
 def main() -> int:
+    """The ros_mongo_retriever executable: exit status 1 with one line on a bad configuration."""
     sys.setswitchinterval(0.0001)  # the player thread gets the interpreter back soon after it wakes
-    rospy.init_node("ros_mongo_retriever")
-    route_logging()
-    try:
-        node = RetrieverNode(read_params(DEFAULTS)).setup()
-    except (ConfigError, StoreError, ValueError) as err:
-        rospy.logfatal(f"ros_mongo_retriever: {err}")
-        return 1
-    rospy.spin()
-    node.shutdown()
-    return 0
+    return run_node("ros_mongo_retriever", _start, loggers=("ros_mongo",), fatal=(StoreError, ValueError))

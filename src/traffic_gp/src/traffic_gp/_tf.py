@@ -1,5 +1,8 @@
 """The one place that imports TensorFlow and GPflow: threads, float64 and the optimiser shim.
 
+Nothing is imported until `libs()` is first called, so every other module of the package can be
+imported without TensorFlow.
+
 TensorFlow >= 2.16 ships Keras 3, whose optimisers cannot minimise GPflow's variables; GPflow
 then needs the `tf_keras` package and exposes it as `gpflow.keras.tf_keras` (GPflow >= 2.9.1;
 on our Python 3.8 pin set, TF 2.13 + GPflow 2.9.2, that name is plain `tf.keras`, whose Adam
@@ -8,11 +11,14 @@ has `minimize` too). Older GPflow has no `gpflow.keras`: then `tf.keras` is the 
 import os
 from types import SimpleNamespace
 
+import numpy as np
+
 _LIBS = {}
 
 
 def libs() -> SimpleNamespace:
-    """tensorflow (`tf`), `gpflow`, and `Adam` (a Keras-2 optimiser class), imported once.
+    """tensorflow (`tf`), `gpflow`, and `Adam` (a Keras-2 optimiser class), imported once;
+    GPflow's default float is then float64.
 
     Threads: `TRAFFIC_GP_TF_THREADS` (default: up to 2, the cores of our robots' computers) for
     work inside one operation, one thread between operations.
@@ -29,6 +35,7 @@ def libs() -> SimpleNamespace:
             pass
         import gpflow
 
+        gpflow.config.set_default_float(np.float64)
         try:
             from gpflow.keras import tf_keras
         except ImportError:  # GPflow < 2.9.1 (with TensorFlow < 2.16)

@@ -17,7 +17,8 @@ from typing import Optional
 import numpy as np
 from scipy import sparse
 
-from robot_sim.people import CellGrid
+import traffic_gp.predictive as predictive
+from robot_common.cells import CellGrid
 from traffic_gp.errors import ConfigError, NotFittedError
 from traffic_gp.observations import Observations
 
@@ -46,8 +47,6 @@ class _CellBaseline:
 
     def score(self, obs: Observations) -> float:
         """Mean held-out Poisson log-likelihood of the counts (higher is better)."""
-        from traffic_gp import predictive
-
         mean = np.log(self.predict(obs.x, obs.y, obs.t))
         return float(np.mean(predictive.log_density(obs.count, mean, 0.0, obs.exposure)))
 

@@ -16,8 +16,8 @@ from typing import Sequence
 import numpy as np
 from scipy import ndimage
 
-from robot_sim.maps import FREE
-from robot_sim.people import CellGrid
+from robot_common.cells import CellGrid
+from robot_common.maps import FREE
 from traffic_gp.errors import ConfigError
 
 MAX_COST = 95

@@ -1,4 +1,9 @@
-"""Errors of the traffic_gp package."""
+"""Errors of the traffic_gp package: one base error, a few specific ones.
+
+`NotFittedError` also derives from `robot_common.errors.NotFittedError` (the workspace's one "not
+fitted" convention), so callers may catch either.
+"""
+from robot_common.errors import NotFittedError as CommonNotFittedError
 
 
 class TrafficError(RuntimeError):
@@ -9,7 +14,7 @@ class ObservationError(TrafficError, ValueError):
     """Observations are malformed: wrong shapes, negative counts, non-positive exposure, NaN."""
 
 
-class NotFittedError(TrafficError):
+class NotFittedError(TrafficError, CommonNotFittedError):
     """A model was asked to predict or save before it was fitted."""
 
 

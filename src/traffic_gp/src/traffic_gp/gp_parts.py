@@ -1,8 +1,9 @@
 """GPflow pieces of the crowd model: the Poisson likelihood with exposure, the space-time kernel,
 the SVGP itself, its training step and its parameters as plain arrays.
 
-This module imports TensorFlow and GPflow (through `traffic_gp._tf`); import it only where a model
-is built or used.
+Importing this module is cheap: TensorFlow and GPflow are imported (through `traffic_gp._tf`) by
+the first function called here, so the estimator can import it at the top while a process that
+only predicts from a saved posterior (`posterior.PosteriorSnapshot`) never loads TensorFlow.
 """
 from typing import Dict, Tuple
 
@@ -11,53 +12,72 @@ import numpy as np
 from traffic_gp._tf import libs
 from traffic_gp.errors import ModelFormatError
 
-_L = libs()
-tf, gpflow = _L.tf, _L.gpflow
 FLOAT = np.float64
-gpflow.config.set_default_float(FLOAT)
 GAUSS_HERMITE = np.polynomial.hermite.hermgauss(20)
+_LIKELIHOOD = []      # the PoissonExposure class, made once TensorFlow is imported
 
 
-class PoissonExposure(gpflow.likelihoods.Likelihood):
-    """Counts with exposure: Y = [count, exposure]; count ~ Poisson(exposure * exp(f)).
+def library_versions() -> str:
+    """'tensorflow X, gpflow Y' (imports them)."""
+    return libs().versions
 
-    `exp(f)` is the people density (per m^2); the exposure is the effective watched area, so a
-    half-seen cell or a longer watch changes the expected count, not the density.
-    """
 
-    def __init__(self):
-        super().__init__(input_dim=None, latent_dim=1, observation_dim=2)
+def poisson_exposure():
+    """A new PoissonExposure likelihood (the class is built on first use: it derives from GPflow's
+    Likelihood)."""
+    if not _LIKELIHOOD:
+        _LIKELIHOOD.append(_poisson_exposure_class(libs()))
+    return _LIKELIHOOD[0]()
 
-    def _log_prob(self, X, F, Y):
-        count, expo = Y[..., :1], Y[..., 1:]
-        log_rate = tf.math.log(expo) + F
-        return tf.reduce_sum(count * log_rate - tf.exp(log_rate) - tf.math.lgamma(count + 1.0), -1)
 
-    def _variational_expectations(self, X, Fmu, Fvar, Y):
-        count, expo = Y[..., :1], Y[..., 1:]
-        return tf.reduce_sum(count * (tf.math.log(expo) + Fmu) - expo * tf.exp(Fmu + Fvar / 2.0)
-                             - tf.math.lgamma(count + 1.0), -1)
+def _poisson_exposure_class(lib):
+    tf, gpflow = lib.tf, lib.gpflow
 
-    def _predict_mean_and_var(self, X, Fmu, Fvar):
-        # Y's second column (the exposure) is not known here: per unit exposure.
-        mean = tf.exp(Fmu + Fvar / 2.0)
-        return mean, mean + (tf.exp(Fvar) - 1.0) * tf.square(mean)
+    class PoissonExposure(gpflow.likelihoods.Likelihood):
+        """Counts with exposure: Y = [count, exposure]; count ~ Poisson(exposure * exp(f)).
 
-    def _predict_log_density(self, X, Fmu, Fvar, Y):
-        nodes, weights = GAUSS_HERMITE
-        count, expo = Y[..., :1], Y[..., 1:]
-        f = Fmu + tf.sqrt(2.0 * Fvar) * nodes                       # [..., n_nodes]
-        log_rate = tf.math.log(expo) + f
-        log_p = count * log_rate - tf.exp(log_rate) - tf.math.lgamma(count + 1.0)
-        return tf.reduce_logsumexp(log_p + np.log(weights / np.sqrt(np.pi)), axis=-1)
+        `exp(f)` is the people density (per m^2); the exposure is the effective watched area, so
+        a half-seen cell or a longer watch changes the expected count, not the density.
+        """
+
+        def __init__(self):
+            super().__init__(input_dim=None, latent_dim=1, observation_dim=2)
+
+        def _log_prob(self, X, F, Y):
+            count, expo = Y[..., :1], Y[..., 1:]
+            log_rate = tf.math.log(expo) + F
+            return tf.reduce_sum(count * log_rate - tf.exp(log_rate) - tf.math.lgamma(count + 1.0),
+                                 -1)
+
+        def _variational_expectations(self, X, Fmu, Fvar, Y):
+            count, expo = Y[..., :1], Y[..., 1:]
+            return tf.reduce_sum(count * (tf.math.log(expo) + Fmu) - expo * tf.exp(Fmu + Fvar / 2.0)
+                                 - tf.math.lgamma(count + 1.0), -1)
+
+        def _predict_mean_and_var(self, X, Fmu, Fvar):
+            # Y's second column (the exposure) is not known here: per unit exposure.
+            mean = tf.exp(Fmu + Fvar / 2.0)
+            return mean, mean + (tf.exp(Fvar) - 1.0) * tf.square(mean)
+
+        def _predict_log_density(self, X, Fmu, Fvar, Y):
+            nodes, weights = GAUSS_HERMITE
+            count, expo = Y[..., :1], Y[..., 1:]
+            f = Fmu + tf.sqrt(2.0 * Fvar) * nodes                       # [..., n_nodes]
+            log_rate = tf.math.log(expo) + f
+            log_p = count * log_rate - tf.exp(log_rate) - tf.math.lgamma(count + 1.0)
+            return tf.reduce_logsumexp(log_p + np.log(weights / np.sqrt(np.pi)), axis=-1)
+
+    return PoissonExposure
 
 
 def _space(lengthscale: float):
+    gpflow = libs().gpflow
     return gpflow.kernels.SquaredExponential(lengthscales=[lengthscale, lengthscale],
                                              active_dims=[0, 1])
 
 
 def _cycle(period: float, lengthscale: float, variance: float = 1.0):
+    gpflow = libs().gpflow
     base = gpflow.kernels.SquaredExponential(variance=variance, lengthscales=lengthscale,
                                              active_dims=[2])
     kernel = gpflow.kernels.Periodic(base, period=period)
@@ -73,6 +93,7 @@ def build_kernel(*, spatial_lengthscale: float, hourly: bool, weekly: bool):
     Periodic lengthscales are in units of the sine of the phase: 0.5 of a 24 h period is about
     4 h, 0.3 of a 1 h period about 6 minutes (the rush before the hour).
     """
+    gpflow = libs().gpflow
     parts = [_space(spatial_lengthscale) * _cycle(24.0, 0.6)]
     if hourly:   # rushes: an hourly cycle whose strength varies over the day (or week)
         envelope = _cycle(168.0, 0.1) if weekly else _cycle(24.0, 0.6)
@@ -84,8 +105,11 @@ def build_kernel(*, spatial_lengthscale: float, hourly: bool, weekly: bool):
 
 def build_model(inducing: np.ndarray, *, spatial_lengthscale: float, hourly: bool, weekly: bool,
                 log_mean: float, num_data: int, train_inducing: bool):
+    """The whitened SVGP with the PoissonExposure likelihood and a constant mean `log_mean`."""
+    lib = libs()
+    tf, gpflow = lib.tf, lib.gpflow
     kernel = build_kernel(spatial_lengthscale=spatial_lengthscale, hourly=hourly, weekly=weekly)
-    model = gpflow.models.SVGP(kernel, PoissonExposure(),
+    model = gpflow.models.SVGP(kernel, poisson_exposure(),
                                gpflow.inducing_variables.InducingPoints(inducing.astype(FLOAT)),
                                mean_function=gpflow.mean_functions.Constant(np.array([log_mean])),
                                num_latent_gps=1, whiten=True)
@@ -100,12 +124,15 @@ class Trainer:
     forward and backward pass (GPflow's two `minimize` calls would need two)."""
 
     def __init__(self, model, *, learning_rate: float, gamma: float):
+        lib = libs()
+        tf, gpflow = lib.tf, lib.gpflow
+        self._tf = tf
         self.model = model
         gpflow.set_trainable(model.q_mu, False)
         gpflow.set_trainable(model.q_sqrt, False)
         self.gamma = tf.Variable(gamma, dtype=FLOAT, trainable=False)
         self.natgrad = gpflow.optimizers.NaturalGradient(gamma=self.gamma)
-        self.adam = _L.Adam(learning_rate=learning_rate)
+        self.adam = lib.Adam(learning_rate=learning_rate)
         spec = [tf.TensorSpec([None, 3], FLOAT), tf.TensorSpec([None, 2], FLOAT)]
         single_pass = hasattr(self.natgrad, "_natgrad_apply_gradients")  # GPflow 2.9 - 2.11
         self.step = tf.function(self._step if single_pass else self._two_pass_step,
@@ -114,6 +141,7 @@ class Trainer:
 
     def _step(self, X, Y):
         model = self.model
+        tf = self._tf
         q_vars = [model.q_mu.unconstrained_variable, model.q_sqrt.unconstrained_variable]
         hypers = list(model.trainable_variables)
         with tf.GradientTape(watch_accessed_variables=False) as tape:
@@ -132,6 +160,7 @@ class Trainer:
 def predict_latent(model, X: np.ndarray, full_cov: bool = False,
                    chunk: int = 20000) -> Tuple[np.ndarray, np.ndarray]:
     """Mean and (co)variance of f at the rows of X, in chunks of rows (memory stays small)."""
+    tf = libs().tf
     if full_cov:
         mean, cov = model.predict_f(tf.constant(X, dtype=FLOAT), full_cov=True)
         return mean.numpy()[:, 0], cov.numpy()[0]
@@ -145,6 +174,7 @@ def predict_latent(model, X: np.ndarray, full_cov: bool = False,
 
 def parameter_values(model) -> Dict[str, np.ndarray]:
     """Every parameter in its unconstrained form (restores bit for bit), and plain variables."""
+    gpflow = libs().gpflow
     values = {}
     for path, variable in gpflow.utilities.parameter_dict(model).items():
         if isinstance(variable, gpflow.Parameter):
@@ -155,6 +185,8 @@ def parameter_values(model) -> Dict[str, np.ndarray]:
 
 
 def assign_parameter_values(model, values: Dict[str, np.ndarray]) -> None:
+    """Set every parameter from `parameter_values`' form; refuses another layout or shape."""
+    gpflow = libs().gpflow
     params = gpflow.utilities.parameter_dict(model)
     if set(params) != set(values):
         missing, extra = sorted(set(params) - set(values)), sorted(set(values) - set(params))

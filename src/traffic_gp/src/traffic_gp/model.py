@@ -1,22 +1,29 @@
 """TrafficGP: where and when people are, learnt from counts with a sparse variational GP.
 
 The latent f(x, y, t) is the log people density (per m^2) over the map and the time of day (or of
-the week, `weekly=True`); counts are Poisson(exposure * exp(f)) (`gp_parts.PoissonExposure`).
+the week, `weekly=True`); counts are Poisson(exposure * exp(f)) (`gp_parts.poisson_exposure`).
 Kernel: space x daily cycle, plus (`hourly=True`) space x hourly cycle x daily envelope for the
 rush before the hour, plus (`weekly=True`) space x weekly cycle. Training: minibatches, natural
 gradients for q(u) and Adam for the hyperparameters, both step sizes lowered tenfold over the
 last 40 % of a `fit`; `partial_fit` continues from the current state (warm start) with the new
-rows added to the data. TensorFlow is imported on first use.
+rows added to the data. TensorFlow is imported on first use (by `gp_parts`).
+
+The estimator owns its persistence: `save` writes its parameters, fitted state and (optionally)
+training rows through the file format of `persistence`; the `load` classmethod rebuilds a fitted
+estimator from such a file without training.
 """
 import logging
 import time
 from typing import Optional
 
 import numpy as np
+from tqdm import tqdm
 
-from robot_sim.people import HOURS_PER_WEEK
-from traffic_gp.errors import ConfigError, NotFittedError
+import traffic_gp.gp_parts as gp_parts
+from robot_common.cells import HOURS_PER_WEEK
+from traffic_gp.errors import ConfigError, ModelFormatError, NotFittedError
 from traffic_gp.observations import Observations
+from traffic_gp.persistence import read_parameters, write_model_file
 from traffic_gp.posterior import LatentPredictions
 
 log = logging.getLogger(__name__)
@@ -86,8 +93,6 @@ class TrafficGP(LatentPredictions):
         self._check_params()
         if len(obs) == 0:
             raise NotFittedError("cannot fit on zero observations")
-        from traffic_gp import gp_parts
-
         self._rng = np.random.default_rng(self.random_state)
         self.data_ = obs
         inputs = obs.inputs(self.period)
@@ -120,8 +125,6 @@ class TrafficGP(LatentPredictions):
         return unique[self._rng.choice(unique.shape[0], self.n_inducing, replace=False)]
 
     def _train(self, n_steps: int, anneal: bool = False) -> "TrafficGP":
-        from traffic_gp import gp_parts
-
         if self._trainer is None:
             self._trainer = gp_parts.Trainer(self.model_, learning_rate=self.learning_rate,
                                              gamma=self.natgrad_gamma)
@@ -131,7 +134,6 @@ class TrafficGP(LatentPredictions):
         size = min(self.batch_size, len(self.data_))
         steps = range(n_steps)
         if self.progress and n_steps:
-            from tqdm import tqdm
             steps = tqdm(steps, desc="training crowd GP", unit="step", mininterval=1.0)
         start = time.perf_counter()
         fresh = not self._trainer_used
@@ -173,18 +175,49 @@ class TrafficGP(LatentPredictions):
         return len(self.data_)
 
     def _latent(self, inputs: np.ndarray, full_cov: bool = False):
-        from traffic_gp import gp_parts
-
         return gp_parts.predict_latent(self.model_, inputs, full_cov=full_cov)
 
     # ---- persistence ----------------------------------------------------------------------
     def save(self, path, *, include_data: bool = True, meta: Optional[dict] = None):
-        from traffic_gp.persistence import save_model
+        """Write the fitted model to `path` (.npz, see `persistence`); returns the path.
 
-        return save_model(self, path, include_data=include_data, meta=meta)
+        `include_data=False` leaves the training rows out (the file can predict, and
+        `partial_fit` after loading then starts from the new rows only); `meta` (JSON-able,
+        e.g. the map) comes back as `meta_` after `load`.
+        """
+        if not self._fitted():
+            raise NotFittedError("cannot save a TrafficGP that is not fitted")
+        header = {"params": self.get_params(), "n_steps": self.n_steps_,
+                  "n_rows": len(self.data_), "elbo": self.elbo_[-1] if self.elbo_ else None,
+                  "train_seconds": self.train_seconds_,
+                  "libraries": gp_parts.library_versions(), "meta": meta or {}}
+        return write_model_file(path, header, gp_parts.parameter_values(self.model_),
+                                self.data_ if include_data else None)
 
     @classmethod
     def load(cls, path) -> "TrafficGP":
-        from traffic_gp.persistence import load_model
+        """A fitted `TrafficGP` with the parameters saved in `path`; nothing is trained."""
+        header, values, data = read_parameters(path, with_data=True)
+        try:
+            estimator = cls(**header["params"])
+            inducing = values[".inducing_variable.Z"]
+        except (TypeError, KeyError) as err:
+            raise ModelFormatError(f"{path}: the saved model lacks {err}") from err
+        estimator._restore(header, values, inducing, data)
+        return estimator
 
-        return load_model(path)
+    def _restore(self, header: dict, values: dict, inducing: np.ndarray,
+                 data: Optional[Observations]) -> None:
+        """The fitted state of a saved model (the file's header, parameters and rows)."""
+        self._rng = np.random.default_rng(self.random_state)
+        self.model_ = gp_parts.build_model(
+            inducing, spatial_lengthscale=self.spatial_lengthscale, hourly=self.hourly,
+            weekly=self.weekly, log_mean=0.0, num_data=header["n_rows"],
+            train_inducing=self.train_inducing)
+        gp_parts.assign_parameter_values(self.model_, values)
+        self.data_ = data if data is not None else Observations.empty()
+        self.n_steps_, self.train_seconds_ = header["n_steps"], header["train_seconds"]
+        self.compile_seconds_ = 0.0
+        self.elbo_ = [header["elbo"]] if header["elbo"] is not None else []
+        self.meta_ = header["meta"]
+        self._trainer = None

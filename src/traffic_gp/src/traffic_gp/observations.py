@@ -11,7 +11,7 @@ from typing import Iterable, Optional, Sequence
 
 import numpy as np
 
-from robot_sim.people import DWELL_TIME_S, HOURS_PER_WEEK, CellGrid, View, exposure
+from robot_common.cells import DWELL_TIME_S, HOURS_PER_WEEK, CellGrid, View, exposure
 from traffic_gp.errors import ObservationError
 
 FIELDS = ("x", "y", "t", "exposure", "count")

@@ -4,7 +4,7 @@ from typing import Dict, Optional, Sequence
 
 import numpy as np
 
-from robot_sim.people import CellGrid
+from robot_common.cells import CellGrid
 
 
 def _pyplot():

@@ -2,19 +2,20 @@
 
 Importing TensorFlow and GPflow takes several seconds, and a node that loads a saved model only to
 answer queries needs neither. `PosteriorSnapshot.load(path)` reads the parameters a `TrafficGP`
-saved (persistence.py), maps them to their constrained values as GPflow does (softplus for the
-positive ones, TensorFlow Probability's fill_triangular for q_sqrt) and predicts the latent log
-density as the whitened SVGP's `predict_f` does. `LatentPredictions` holds the predictions both
-`TrafficGP` and the snapshot derive from the latent Gaussian.
+saved (`persistence.read_parameters`), maps them to their constrained values as GPflow does
+(softplus for the positive ones, TensorFlow Probability's fill_triangular for q_sqrt) and
+predicts the latent log density as the whitened SVGP's `predict_f` does. `LatentPredictions`
+holds the predictions both `TrafficGP` and the snapshot derive from the latent Gaussian.
 """
 import re
 from typing import Dict, List, Tuple
 
 import numpy as np
 
-from robot_sim.people import HOURS_PER_WEEK
-from traffic_gp import predictive
+import traffic_gp.predictive as predictive
+from robot_common.cells import HOURS_PER_WEEK
 from traffic_gp.errors import ConfigError, ModelFormatError, NotFittedError
+from traffic_gp.persistence import read_parameters
 
 JITTER = 1e-6          # GPflow's default jitter on K(Z, Z)
 CHUNK = 20000          # prediction rows per block (memory stays small)
@@ -125,8 +126,6 @@ class PosteriorSnapshot(LatentPredictions):
     @classmethod
     def load(cls, path) -> "PosteriorSnapshot":
         """The posterior of a model file written by `TrafficGP.save` (no TensorFlow)."""
-        from traffic_gp.persistence import read_parameters
-
         header, values, _ = read_parameters(path)
         return cls(header, values, str(path))
 

@@ -8,8 +8,9 @@ from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
-from robot_sim.people import CellGrid
-from traffic_gp import costmap, predictive
+import traffic_gp.costmap as costmap
+import traffic_gp.predictive as predictive
+from robot_common.cells import CellGrid
 from traffic_gp.errors import ConfigError, TrafficError
 
 MAX_JOINT_CELLS = 1500   # above this, region sums treat cells as independent

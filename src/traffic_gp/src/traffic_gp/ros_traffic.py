@@ -1,11 +1,14 @@
-"""ROS side of the crowd model: PeopleCount messages in, predictions and crowd cost maps out."""
+"""ROS side of the crowd model: PeopleCount messages in, predictions and crowd cost maps out.
+
+`TrafficServer` is built from a `ServerConfig` (construction is pure); `setup()` wires ROS. The
+node executable `nodes/traffic_server` only reads the parameters and calls `start`.
+"""
 import math
 import os
 import queue
 import shutil
 import threading
 import time
-from dataclasses import dataclass, field
 from typing import List, Optional
 
 import numpy as np
@@ -13,74 +16,39 @@ import rospy
 from nav_msgs.msg import OccupancyGrid
 from std_srvs.srv import Trigger, TriggerResponse
 
-from robot_sim.maps import load_map
-from robot_sim.people import CellGrid, hours_of_week, visible_cells
-from robot_sim.ros_maps import grid_to_msg, msg_to_grid
+from robot_common.cells import CellGrid, hours_of_week, visible_cells
+from robot_common.maps import load_map
+from robot_common.msg import PeopleCount
+from robot_common.ros_maps import grid_to_msg, msg_to_grid
+from robot_common.ros_node import read_config
 from traffic_gp.errors import TrafficError
 from traffic_gp.model import TrafficGP
-from traffic_gp.msg import PeopleCount
 from traffic_gp.observations import Observations, aggregate_view
 from traffic_gp.posterior import PosteriorSnapshot
 from traffic_gp.queries import CrowdQueries
+from traffic_gp.server_config import ServerConfig
 from traffic_gp.srv import PredictCount, PredictCountResponse, PredictRegion, PredictRegionResponse
-
-
-@dataclass
-class ServerConfig:
-    """The node's parameters (defaults here and in config/traffic_gp.yaml)."""
-
-    map_yaml: str = ""
-    cell_size: float = 0.5
-    model_path: str = ""
-    save_on_shutdown: bool = False
-    utc_offset_hours: Optional[float] = None       # None: the machine's local time zone
-    clock: str = "ros"                             # "ros" or "observations"
-    dwell_time: float = 20.0
-    min_rows: int = 2000
-    initial_steps: int = 600
-    train_period: float = 2.0
-    chunk_steps: int = 20
-    publish_period: float = 5.0
-    lookahead_minutes: float = 30.0
-    lookahead_step_minutes: float = 5.0
-    saturation_density: float = 1.0
-    wall_value: int = -1
-    full_resolution: bool = True
-    frame_id: str = "map"
-    model: dict = field(default_factory=dict)
-
-    @classmethod
-    def from_params(cls) -> "ServerConfig":
-        config = cls()
-        for name in cls.__dataclass_fields__:
-            value = rospy.get_param("~" + name, getattr(config, name))
-            if name == "utc_offset_hours":
-                value = None if value in ("", "local", None) else float(value)
-            setattr(config, name, value)
-        if config.clock not in ("ros", "observations"):
-            raise TrafficError(f"~clock must be 'ros' or 'observations', got {config.clock!r}")
-        if config.wall_value not in (-1, 100):
-            raise TrafficError(f"~wall_value must be -1 or 100, got {config.wall_value}")
-        return config
 
 
 class TrafficServer:
     """Learns where and when people are from PeopleCount messages; serves a crowd cost map.
 
-    Parameters (private; defaults in config/traffic_gp.yaml): map_yaml ("": use the `map`
-    topic), cell_size (0.5 m), model_path ("": start untrained; else load it at start, without
-    training, and save there), save_on_shutdown (false), utc_offset_hours ("": local zone),
-    clock ("ros": now is ROS time; "observations": the newest observation's stamp),
-    dwell_time (20 s), min_rows (2000 rows before a first fit), initial_steps (600),
-    train_period (2 s), chunk_steps (20 training steps per lock hold), publish_period (5 s),
-    lookahead_minutes (30), lookahead_step_minutes (5), saturation_density (1 person/m^2 = 95),
-    wall_value (-1 or 100), full_resolution (true: cost maps at the map's resolution),
-    frame_id ("map"), model (dict of TrafficGP keyword arguments).
-    Topics: subscribes `map` (nav_msgs/OccupancyGrid, when no map_yaml), `people_counts`
-    (traffic_gp/PeopleCount); publishes (latched) `~crowd_costmap` (maximum over now +
-    look-ahead) and `~crowd_costmap_now` (nav_msgs/OccupancyGrid, 0..95, walls wall_value).
-    Services: `~predict_count` (PredictCount), `~predict_region` (PredictRegion),
-    `~save_model` (std_srvs/Trigger).
+    Parameters (private, `ServerConfig`; generated config/traffic_gp.yaml):
+      ~map_yaml ("": the `map` topic), ~cell_size (0.5 m), ~model_path ("": start untrained;
+      else load it at start, without training, and save there), ~save_on_shutdown (false),
+      ~utc_offset_hours (null / "" / "local": the machine's zone), ~clock ("ros": now is ROS
+      time; "observations": the newest observation's stamp), ~dwell_time (20 s), ~min_rows
+      (2000 rows before a first fit), ~initial_steps (600), ~train_period (2 s), ~chunk_steps
+      (20 training steps per lock hold), ~publish_period (5 s), ~lookahead_minutes (30),
+      ~lookahead_step_minutes (5), ~saturation_density (1 person/m^2 = 95), ~wall_value (-1 or
+      100), ~full_resolution (true: cost maps at the map's resolution), ~frame_id ("map"),
+      ~model ({}: dict of TrafficGP keyword arguments).
+    Subscribes: `map` (nav_msgs/OccupancyGrid, only when map_yaml is empty), `people_counts`
+      (robot_common/PeopleCount).
+    Publishes (latched): `~crowd_costmap` (maximum over now .. now + look-ahead) and
+      `~crowd_costmap_now` (nav_msgs/OccupancyGrid, 0..95, walls wall_value).
+    Services: `~predict_count` (traffic_gp/PredictCount), `~predict_region`
+      (traffic_gp/PredictRegion), `~save_model` (std_srvs/Trigger).
     """
 
     def __init__(self, config: ServerConfig):
@@ -296,3 +264,9 @@ class TrafficServer:
         if self.config.save_on_shutdown and self.model is not None and self.config.model_path:
             self.save()
 
+
+def start() -> TrafficServer:
+    """Read the node's parameters, build the server and wire it to ROS (after init_node)."""
+    server = TrafficServer(read_config(ServerConfig))
+    server.setup()
+    return server

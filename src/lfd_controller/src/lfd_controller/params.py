@@ -1,0 +1,151 @@
+"""Parameters of the lfd_controller nodes, one `NodeConfig` class per node (no ROS).
+
+Each default is written once, here (or in the core class it names: the joystick mapping's in
+`teleop.JoyMapping`, the robot limits' in `robot_common.unicycle.UnicycleLimits`). The YAML files
+in config/ that the launch files load are generated from these classes
+(`python -m robot_common.config_files --write`); the nodes read their `~` parameters into them
+with `robot_common.ros_node.read_config`. `learn_reward` is a command-line tool: its options are
+built from `LearnRewardConfig` (`learn_reward_parser`).
+"""
+import argparse
+from dataclasses import dataclass, fields
+from typing import Any, Dict, List, Optional, Sequence
+
+from lfd_controller.teleop import JoyMapping
+from robot_common.errors import ConfigError
+from robot_common.params import NodeConfig, param
+from robot_common.unicycle import UnicycleLimits
+
+__all__ = ["JoyTeleopConfig", "DemoRecorderConfig", "RewardControllerConfig", "LearnRewardConfig",
+           "learn_reward_parser", "ROS_HOME_PREFIX"]
+
+# Leading marker of a path under $ROS_HOME (or ~/.ros), resolved by the node that uses it.
+ROS_HOME_PREFIX = "$ROS_HOME"
+
+LIMIT_NAMES = ("v_max", "w_max", "a_max", "alpha_max")
+
+
+@dataclass
+class JoyTeleopConfig(NodeConfig):
+    """joy_teleop: an Xbox 360 pad under the Linux joy driver (xpad) by default."""
+
+    axis_linear: int = param(JoyMapping.axis_linear, "stick axis that drives (left stick up/down)")
+    axis_angular: int = param(JoyMapping.axis_angular, "stick axis that turns (left stick left/right)")
+    scale_linear: float = param(JoyMapping.scale_linear, "m/s at full stick")
+    scale_angular: float = param(JoyMapping.scale_angular, "rad/s at full stick")
+    deadzone: float = param(JoyMapping.deadzone, "stick fraction ignored around the centre, in [0, 1)")
+    enable_button: int = param(JoyMapping.enable_button, "dead-man button held to move (LB)")
+    record_start_button: int = param(JoyMapping.record_start_button,
+                                     "starts recording a demonstration (A)")
+    record_stop_button: int = param(JoyMapping.record_stop_button, "stops recording (B)")
+    recorder: str = param("demo_recorder", "node whose ~start/~stop services the buttons call")
+
+    def mapping(self) -> JoyMapping:
+        """The core's joystick mapping (LfdError on a bad index or dead zone)."""
+        return JoyMapping(**{spec.name: getattr(self, spec.name) for spec in fields(JoyMapping)})
+
+
+@dataclass
+class DemoRecorderConfig(NodeConfig):
+    """demo_recorder: where demonstrations go and how samples are paired."""
+
+    bag_dir: str = param(ROS_HOME_PREFIX + "/lfd_demos",
+                         "one bag per demonstration (leading $ROS_HOME: ROS_HOME or ~/.ros; "
+                         "'' = no bags)")
+    db_url: str = param("", "ros_mongo store URL (CouchDB or mongodb://...; '' = no database)")
+    source: str = param("joystick", "who demonstrates (stored with each demo, used as a tag)")
+    session_id: str = param("", "stored with each demo in the database; learn with --session-id to "
+                                "take only these ('' = none)")
+    min_steps: int = param(5, "shortest demonstration stored (steps)")
+    use_applied_cmd: bool = param(True, "simulator: exact pairing with cmd_vel_applied + sim_time; "
+                                        "robot: false (odom with the latest cmd_vel)")
+
+
+@dataclass
+class RewardControllerConfig(NodeConfig):
+    """reward_controller: receding-horizon control with a learned reward."""
+
+    reward_file: str = param("", "reward saved by learn_reward (required)")
+    rate: float = param(10.0, "control cycles per second (Hz)")
+    horizon: int = param(20, "planning steps")
+    plan_dt: float = param(0.2, "s per planning step (horizon * plan_dt = 4 s look-ahead)")
+    terminal: float = param(10.0, "extra weight of the last step's reward (cost-to-go estimate)")
+    max_iter: int = param(15, "L-BFGS iterations per cycle")
+    goal_tolerance: float = param(0.25, "stops (zero command) within this distance of the goal (m)")
+    v_max: float = param(UnicycleLimits.v_max, "robot speed limit (m/s; the scenario's when one is "
+                                               "received)")
+    w_max: float = param(UnicycleLimits.w_max, "robot turn-rate limit (rad/s)")
+    a_max: float = param(UnicycleLimits.a_max, "robot acceleration limit (m/s^2)")
+    alpha_max: float = param(UnicycleLimits.alpha_max, "robot angular acceleration limit (rad/s^2)")
+    obstacle_radius: float = param(0.25, "radius of the obstacle seen on 'obstacle' (m)")
+    frame: str = param("odom", "frame of the published plan")
+    enabled: bool = param(True, "drive from the start (service ~enable switches)")
+
+    def check(self) -> None:
+        if not self.rate > 0:
+            raise ConfigError(f"~rate must be positive, got {self.rate!r}")
+
+    def limits(self) -> UnicycleLimits:
+        """The robot's limits (ModelError when one is not positive)."""
+        return UnicycleLimits(**{name: getattr(self, name) for name in LIMIT_NAMES})
+
+    def controller_options(self) -> Dict[str, Any]:
+        """Keyword arguments of planner.RecedingHorizonController."""
+        return {"horizon": self.horizon, "plan_dt": self.plan_dt, "terminal": self.terminal,
+                "max_iter": self.max_iter}
+
+
+@dataclass
+class LearnRewardConfig(NodeConfig):
+    """learn_reward: where demonstrations come from, the reward model, where it goes."""
+
+    bags: List[str] = param([], "bag files or folders of bags")
+    db_url: str = param("", "ros_mongo store URL to load demonstrations from")
+    scenario: str = param("", "only demonstrations of this scenario")
+    session_id: str = param("", "only database demonstrations recorded with this session id")
+    kind: str = param("linear", "reward model", choices=("linear", "gp"))
+    output: str = param("", "reward file to write (YAML)")
+    store_db: bool = param(False, "also store the reward in --db-url")
+    plots: str = param("", "folder for plots of demos and reward field")
+    seed: int = param(0, "random seed of the learner")
+    trim_steps: int = param(10, "cut each demo this many steps after it first reaches the goal "
+                                "(-1: no cut)")
+
+    REQUIRED = ("output",)
+
+    def check(self) -> None:
+        if not self.output:
+            raise ConfigError("--output (the reward file to write) is required")
+
+    @property
+    def trim(self) -> Optional[int]:
+        """Steps kept after reaching the goal; None: demonstrations are not cut."""
+        return None if self.trim_steps < 0 else self.trim_steps
+
+    @classmethod
+    def from_args(cls, argv: Sequence[str]) -> "LearnRewardConfig":
+        """Checked options from a command line (argparse exits 2 on a malformed one)."""
+        return cls.from_mapping(vars(learn_reward_parser().parse_args(list(argv))))
+
+
+def learn_reward_parser() -> argparse.ArgumentParser:
+    """learn_reward's command line: one --option per LearnRewardConfig field (--db-url for db_url),
+    with the class's defaults, descriptions and choices."""
+    parser = argparse.ArgumentParser(description="Learn a reward from recorded demonstrations (CIOC).")
+    for name, default, doc in LearnRewardConfig.describe():
+        flag = "--" + name.replace("_", "-")
+        options: Dict[str, Any]
+        if isinstance(default, bool):
+            options = {"action": "store_true"}
+        elif isinstance(default, list):
+            options = {"nargs": "*", "default": default}
+        else:
+            options = {"type": type(default), "default": default,
+                       "choices": _choices(name), "required": name in LearnRewardConfig.REQUIRED}
+        parser.add_argument(flag, dest=name, help=doc, **options)
+    return parser
+
+
+def _choices(name: str) -> Optional[Sequence[Any]]:
+    spec = next(spec for spec in fields(LearnRewardConfig) if spec.name == name)
+    return spec.metadata.get("choices")

@@ -1,0 +1,65 @@
+"""The nodes' parameter classes (no ROS master): defaults, checks, the core objects built from
+them, the learn_reward command line and the bag folder under $ROS_HOME."""
+from pathlib import Path
+
+import pytest
+
+from lfd_controller.errors import LfdError
+from lfd_controller.params import (
+    DemoRecorderConfig,
+    JoyTeleopConfig,
+    LearnRewardConfig,
+    RewardControllerConfig,
+    learn_reward_parser,
+)
+from lfd_controller.ros_recorder import resolve_bag_dir
+from lfd_controller.teleop import JoyMapping
+from robot_common.errors import ConfigError, ModelError
+from robot_common.unicycle import UnicycleLimits
+
+
+def test_teleop_defaults_are_the_core_mapping_and_bad_values_are_refused():
+    assert JoyTeleopConfig.from_mapping({}).mapping() == JoyMapping()
+    config = JoyTeleopConfig.from_mapping({"scale_linear": 1, "deadzone": 0.0, "recorder": "rec/"})
+    assert config.mapping().scale_linear == 1.0 and config.recorder == "rec/"
+    with pytest.raises(ConfigError, match="axis_linear"):
+        JoyTeleopConfig.from_mapping({"axis_linear": 1.5})
+    with pytest.raises(ConfigError, match="unknown"):
+        JoyTeleopConfig.from_mapping({"scale_lienar": 0.4})
+    with pytest.raises(LfdError, match="deadzone"):
+        JoyTeleopConfig.from_mapping({"deadzone": 1.5}).mapping()
+
+
+def test_controller_config_builds_the_limits_and_the_planner_options():
+    config = RewardControllerConfig.from_mapping({"reward_file": "r.yaml", "v_max": 1})
+    assert config.limits() == UnicycleLimits(v_max=1.0)
+    assert config.controller_options() == {"horizon": 20, "plan_dt": 0.2, "terminal": 10.0,
+                                           "max_iter": 15}
+    with pytest.raises(ConfigError, match="rate"):
+        RewardControllerConfig.from_mapping({"rate": 0.0})
+    with pytest.raises(ModelError, match="w_max"):
+        RewardControllerConfig.from_mapping({"w_max": -1.0}).limits()
+
+
+def test_recorder_bag_dir_defaults_under_ros_home(monkeypatch, tmp_path):
+    monkeypatch.setenv("ROS_HOME", str(tmp_path))
+    assert resolve_bag_dir(DemoRecorderConfig.from_mapping({}).bag_dir) == tmp_path / "lfd_demos"
+    assert resolve_bag_dir("") is None
+    assert resolve_bag_dir("~/bags") == Path.home() / "bags"
+    with pytest.raises(ConfigError, match="min_steps"):
+        DemoRecorderConfig.from_mapping({"min_steps": "5"})
+
+
+def test_learn_reward_command_line_takes_the_class_defaults():
+    config = LearnRewardConfig.from_args(["--output", "r.yaml", "--bags", "a", "b", "--db-url", ""])
+    expected = dict(LearnRewardConfig.defaults(), output="r.yaml", bags=["a", "b"])
+    assert config.to_dict() == expected and config.trim == 10
+    config = LearnRewardConfig.from_args(["--output", "r.yaml", "--kind", "gp", "--store-db",
+                                          "--trim-steps", "-1", "--seed", "3"])
+    assert (config.kind, config.store_db, config.trim, config.seed) == ("gp", True, None, 3)
+    with pytest.raises(SystemExit):
+        learn_reward_parser().parse_args(["--kind", "quadratic", "--output", "r.yaml"])
+    with pytest.raises(SystemExit):
+        learn_reward_parser().parse_args([])          # --output is required
+    with pytest.raises(ConfigError, match="output"):
+        LearnRewardConfig.from_mapping({})

@@ -1,0 +1,77 @@
+"""The embedding backends a server can serve, chosen by name, with a fallback that says so.
+
+- "sentence" (default): a pretrained sentence model (region_search.sentence; all-MiniLM-L6-v2 unless
+  `model_path` names another local sentence-transformers folder): whole-phrase vectors.
+- "word2vec": word vectors (region_search.embeddings.WordEmbeddings): trained on Brown + WordNet glosses and
+  cached (`source`), or any pretrained KeyedVectors file (`model_path`, or `source` "pretrained"
+  with `pretrained_path`).
+
+When the sentence model cannot be loaded (PyTorch or sentence-transformers missing, as on a
+Python 3.8 robot; a folder without a model), `load_backend` serves word2vec instead (unless
+`fallback` is off) and returns why in `LoadedBackend.note`, which the server logs and puts in
+every response.
+"""
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Dict, Optional, Union
+
+from region_search.embeddings import WordEmbeddings
+from region_search.errors import ModelError
+from region_search.node_config import BACKENDS, BackendConfig
+from region_search.sentence import SentenceEmbeddings, load_sentence_model
+from region_search.training import load_embeddings
+
+__all__ = ["BACKENDS", "BackendConfig", "LoadedBackend", "load_backend"]
+
+LOG = logging.getLogger(__name__)
+Embeddings = Union[SentenceEmbeddings, WordEmbeddings]
+
+
+@dataclass
+class LoadedBackend:
+    """A loaded model: `backend` is the one actually served; `note` is "" or the fallback reason."""
+
+    embeddings: Embeddings
+    backend: str
+    note: str
+    load_seconds: float
+    info: Dict = field(default_factory=dict)
+
+
+def load_backend(config: Optional[BackendConfig] = None, *, progress: bool = False) -> LoadedBackend:
+    """The model to serve (default: BackendConfig()); ModelError when it (and its allowed
+    fallback) cannot be loaded."""
+    config = config if config is not None else BackendConfig()
+    if config.backend not in BACKENDS:
+        raise ModelError(f"unknown embedding backend {config.backend!r}; use one of {BACKENDS}")
+    start = time.monotonic()
+    note = ""
+    if config.backend == "sentence":
+        try:
+            embeddings = load_sentence_model(config.model_path, threads=config.threads,
+                                             cache_size=config.cache_size,
+                                             batch_size=config.batch_size)
+            return LoadedBackend(embeddings, "sentence", "", time.monotonic() - start)
+        except ModelError as err:
+            if not config.fallback:
+                raise ModelError(f"sentence model unavailable (fallback disabled): {err}") from err
+            note = f"fallback to word2vec: sentence model unavailable: {err}"
+            LOG.warning("%s; loading word2vec (source %r)", note, _word2vec_source(config, False))
+    embeddings, info = _load_word2vec(config, use_model_path=config.backend == "word2vec",
+                                      progress=progress)
+    return LoadedBackend(embeddings, "word2vec", note, time.monotonic() - start, info)
+
+
+def _word2vec_source(config: BackendConfig, use_model_path: bool) -> str:
+    return "pretrained" if use_model_path and config.model_path else config.source
+
+
+def _load_word2vec(config: BackendConfig, *, use_model_path: bool, progress: bool):
+    source = _word2vec_source(config, use_model_path)
+    path = config.model_path if use_model_path and config.model_path else config.pretrained_path
+    cache_dir: Optional[str] = config.cache_dir or None
+    return load_embeddings(source, pretrained_path=path, brown_path=config.brown_path,
+                           wordnet_dir=config.wordnet_dir, params=config.word2vec,
+                           cache_dir=cache_dir, progress=progress, limit=config.limit or None,
+                           options={"remove_components": config.remove_components})

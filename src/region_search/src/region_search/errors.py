@@ -1,0 +1,28 @@
+"""Errors of region search: the embedding models, the corpora and the region recommender
+(no rospy here).
+
+`EmbeddingError` is the package's base error; service handlers turn it into `success=False`
+and a message, the node executables into one FATAL line and exit status 1.
+"""
+
+__all__ = ["EmbeddingError", "EmptyPhraseError", "ModelError", "CorpusError", "LabelFileError"]
+
+
+class EmbeddingError(Exception):
+    """Base class of the region-search errors (embeddings, corpora, labels)."""
+
+
+class EmptyPhraseError(EmbeddingError, ValueError):
+    """A phrase with no words in it (empty, blanks or punctuation only)."""
+
+
+class ModelError(EmbeddingError):
+    """A word-vector model cannot be trained, loaded or found."""
+
+
+class CorpusError(EmbeddingError):
+    """A training corpus is missing or unreadable."""
+
+
+class LabelFileError(EmbeddingError):
+    """A map_labelling label file is missing or malformed."""

@@ -1,0 +1,106 @@
+"""Ranking labelled regions by whole-phrase vectors (a sentence model), not word by word.
+
+`PhraseRegionRecommender` gives each label one text, its name words followed by its WordNet
+expansion (recommender.LabelExpander: synonyms, related words, definition words, strongest
+first), e.g. "water fountain: bubbler drinking babble bubble ... jet provide public", encodes the
+texts once (and again only when new labels appear), and scores a phrase by the cosine of its
+vector with each label's. Room numbers identify rooms but barely move a sentence vector
+("classroom 101" is as close to classroom_102 as to classroom_101), so, as in the word-level
+method where numbers match by spelling only, a number of the phrase that a label carries adds
+`number_weight` to its score and a label that carries only other numbers loses it.
+It is the region recommender's method when the embedding service serves phrase vectors (backend
+"sentence"); with word2vec the word-level `RegionRecommender` is better. Same interface:
+`set_regions`, `recommend` -> `Recommendation`.
+"""
+from typing import Callable, Dict, List, Optional, Sequence
+
+import numpy as np
+
+from region_search.corpora import WordNet
+from region_search.embeddings import EmbeddedWords, phrase_tokens
+from region_search.errors import EmbeddingError
+from region_search.recommender import ExpansionWeights, LabelExpander, RankedRegion, Recommendation, Region
+from region_search.text_similarity import is_number, tokenize
+
+__all__ = ["PhraseRegionRecommender"]
+
+EmbedPhrases = Callable[[List[str]], EmbeddedWords]
+
+
+class PhraseRegionRecommender:
+    """Ranks labelled regions by the cosine of phrase vectors.
+
+    Args:
+        embed_phrases: phrases -> EmbeddedWords with one unit vector per phrase (the embedding
+            service's client, or `SentenceEmbeddings.embed_phrases` in-process).
+        wordnet: expands each label's text with WordNet words; None: the label's name words only.
+        weights: expansion weights; here they only order the added words (strongest first).
+        number_weight: added for a phrase number the label carries, subtracted from a label that
+            carries numbers, none of them the phrase's (0: numbers count as text only).
+    """
+
+    method = "phrase"
+
+    def __init__(self, embed_phrases: EmbedPhrases, *, wordnet: Optional[WordNet] = None,
+                 weights: ExpansionWeights = ExpansionWeights(), number_weight: float = 0.2):
+        self.embed_phrases = embed_phrases
+        self.number_weight = number_weight
+        self.expander = LabelExpander(wordnet, weights)
+        self.regions: List[Region] = []
+        self._texts: Dict[str, str] = {}
+        self._vectors: Dict[str, np.ndarray] = {}
+
+    def label_text(self, name: str) -> str:
+        """The text a label is encoded as: its name words, then its WordNet words."""
+        tokens = tokenize(name)
+        words = self.expander.expand(name) if self.expander.wordnet is not None else {}
+        extra = sorted((w for w in words if w not in tokens), key=lambda w: (-words[w][0], w))
+        return " ".join(tokens) + (": " + " ".join(extra) if extra else "")
+
+    def set_regions(self, regions: Sequence[Region]) -> None:
+        """Use these regions from now on (only labels not seen before are encoded)."""
+        names = sorted({region.name for region in regions} - set(self._vectors))
+        if names:
+            texts = [self.label_text(name) for name in names]
+            embedded = self.embed_phrases(texts)
+            if len(embedded.vectors) != len(names):
+                raise EmbeddingError(f"{len(names)} label texts gave {len(embedded.vectors)} vectors")
+            for name, text, vector in zip(names, texts, embedded.vectors):
+                self._texts[name] = text
+                self._vectors[name] = np.asarray(vector, dtype=np.float64)
+        self.regions = list(regions)
+
+    def recommend(self, phrase: str, top_k: int = 3) -> Recommendation:
+        """The `top_k` best regions (all when top_k <= 0), best first; EmptyPhraseError if empty."""
+        phrase_tokens(phrase)  # EmptyPhraseError for a phrase without words
+        query = self.embed_phrases([phrase])
+        vector = np.asarray(query.vectors[0], dtype=np.float64)
+        numbers = {t for t in tokenize(phrase) if is_number(t)}
+        scores, explanations = {}, {}
+        for name in {r.name for r in self.regions}:
+            cosine = float(self._vectors[name] @ vector)
+            bonus, why = self._number_bonus(numbers, name)
+            scores[name] = cosine + bonus
+            explanations[name] = self._explain(name, cosine) + why
+        ranked = sorted(self.regions, key=lambda r: (-scores[r.name], r.name, r.x, r.y))
+        if top_k > 0:
+            ranked = ranked[:top_k]
+        results = [RankedRegion(r, scores[r.name], explanations[r.name]) for r in ranked]
+        notes = [note for note in "; ".join(query.notes).split("; ") if note]
+        return Recommendation(phrase, results, list(query.oov), notes)
+
+    def _number_bonus(self, numbers, name: str):
+        """(score change, explanation) from the numbers of the phrase and of the label."""
+        own = {t for t in tokenize(name) if is_number(t)}
+        if not numbers or not own or not self.number_weight:
+            return 0.0, ""
+        shared = sorted(numbers & own)
+        if shared:
+            return self.number_weight, f"; number {' '.join(shared)} matches (+{self.number_weight:.2f})"
+        return -self.number_weight, (f"; number {' '.join(sorted(own))} is not "
+                                     f"{' '.join(sorted(numbers))} (-{self.number_weight:.2f})")
+
+    def _explain(self, name: str, score: float) -> str:
+        text = self._texts[name]
+        shown = text if len(text) <= 90 else text[:87].rsplit(" ", 1)[0] + " ..."
+        return f"phrase cosine {score:.2f} with '{shown}'"

@@ -1,0 +1,337 @@
+"""Which labelled region of the map a phrase means ("drinking fountain" -> water_fountain).
+
+- `load_label_file(path)`: regions from a map_labelling JSON file
+  (`{"label": {"x": .., "y": .., "orientation": [qx, qy, qz, qw]}}`).
+- `LabelExpander`: a label's words, plus (from WordNet) the synonyms, derivationally related words
+  and definition words of the longest WordNet lemmas it contains: "water_fountain" also means
+  "drinking fountain, bubbler: a public fountain to provide a jet of drinking water".
+- `RegionRecommender`: ranks regions for a phrase. Each query word finds its best match among a
+  label's (weighted) words, by embedding cosine or by spelling (label-name words only: "towne",
+  room numbers); the score is the SIF-weighted mean of these matches over the query's words.
+  Word vectors come from a callable (the embedding service's client, or a model in-process).
+"""
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from region_search.corpora import WordNet
+from region_search.embeddings import EmbeddedWords, phrase_tokens
+from region_search.errors import EmbeddingError, LabelFileError
+from region_search.text_similarity import STOPWORDS, is_number, spelling_similarity, tokenize
+
+__all__ = ["Region", "load_label_file", "parse_labels", "ExpansionWeights", "LabelExpander",
+           "RankedRegion", "Recommendation", "RegionRecommender"]
+
+EmbedWords = Callable[[List[str]], EmbeddedWords]
+
+
+@dataclass(frozen=True)
+class Region:
+    """A labelled place in the map frame."""
+
+    name: str
+    x: float
+    y: float
+    z: float = 0.0
+    orientation: Tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+    source: str = "label_file"
+
+
+def parse_labels(data, *, origin: str = "labels") -> List[Region]:
+    """Regions from a decoded map_labelling JSON object; LabelFileError names a bad entry."""
+    if not isinstance(data, dict):
+        raise LabelFileError(f"{origin}: expected a JSON object of labels, got {type(data).__name__}")
+    regions = []
+    for name, pose in sorted(data.items()):
+        if not isinstance(pose, dict) or not all(
+                isinstance(pose.get(k), (int, float)) and not isinstance(pose.get(k), bool)
+                for k in ("x", "y")):
+            raise LabelFileError(f"{origin}: label {name!r} needs numeric 'x' and 'y', got {pose!r}")
+        orientation = pose.get("orientation", [0.0, 0.0, 0.0, 1.0])
+        if not (isinstance(orientation, (list, tuple)) and len(orientation) == 4
+                and all(isinstance(v, (int, float)) for v in orientation)):
+            raise LabelFileError(f"{origin}: label {name!r} has a bad orientation {orientation!r} "
+                                 "(want [qx, qy, qz, qw])")
+        if not tokenize(name):
+            raise LabelFileError(f"{origin}: label {name!r} has no letters or digits")
+        regions.append(Region(name, float(pose["x"]), float(pose["y"]), float(pose.get("z", 0.0)),
+                              tuple(float(v) for v in orientation)))
+    return regions
+
+
+def load_label_file(path) -> List[Region]:
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except OSError as err:
+        raise LabelFileError(f"cannot read label file {path}: {err.strerror}") from err
+    except ValueError as err:
+        raise LabelFileError(f"label file {path} is not valid JSON: {err}") from err
+    return parse_labels(data, origin=str(path))
+
+
+@dataclass(frozen=True)
+class ExpansionWeights:
+    """How much a label word counts, by where it comes from."""
+
+    name: float = 1.0
+    synonym: float = 0.9
+    derived: float = 0.8
+    definition: float = 0.6
+    senses: int = 2  # WordNet senses used per lemma (most frequent first)
+
+
+class LabelExpander:
+    """A label's words with weights and origins, expanded with WordNet (when given)."""
+
+    def __init__(self, wordnet: Optional[WordNet] = None,
+                 weights: ExpansionWeights = ExpansionWeights()):
+        self.wordnet = wordnet
+        self.weights = weights
+
+    def expand(self, label: str) -> Dict[str, Tuple[float, str]]:
+        """word -> (weight, origin) for a label name such as "vending_machines"."""
+        tokens = tokenize(label)
+        words: Dict[str, Tuple[float, str]] = {}
+        for token in tokens:
+            _add(words, token, self.weights.name, "name")
+        for _, _, lemma, synsets in self.lemma_spans(tokens):
+            self._add_synsets(words, lemma, synsets)
+        return words
+
+    def expand_words(self, tokens: Sequence[str]) -> List[Dict[str, Tuple[float, str]]]:
+        """Per token: the WordNet words (weight, origin) of the lemma covering it, if any."""
+        expansions: List[Dict[str, Tuple[float, str]]] = [{} for _ in tokens]
+        for start, end, lemma, synsets in self.lemma_spans(tokens):
+            words: Dict[str, Tuple[float, str]] = {}
+            self._add_synsets(words, lemma, synsets)
+            for index in range(start, end):
+                expansions[index] = {w: v for w, v in words.items() if w != tokens[index]}
+        return expansions
+
+    def lemma_spans(self, tokens: Sequence[str]) -> List[Tuple[int, int, str, list]]:
+        """(start, end, lemma, synsets): the longest runs of tokens WordNet knows as one lemma
+        ("water fountain", "work out"), left to right; tokens in no lemma are skipped."""
+        spans = []
+        start = 0
+        while self.wordnet is not None and start < len(tokens):
+            for end in range(len(tokens), start, -1):
+                if all(is_number(t) or t in STOPWORDS for t in tokens[start:end]):
+                    continue
+                lemma, synsets = self._lookup("_".join(tokens[start:end]))
+                if synsets:
+                    spans.append((start, end, lemma, synsets))
+                    start = end
+                    break
+            else:
+                start += 1
+        return spans
+
+    def _lookup(self, lemma: str):
+        for pos in ("n", "v", "a"):
+            for form in self.wordnet.morphy(lemma, pos):
+                synsets = self.wordnet.synsets(form, pos)[:self.weights.senses]
+                if synsets:
+                    return form, synsets
+        return lemma, []
+
+    def _add_synsets(self, words, lemma: str, synsets) -> None:
+        w = self.weights
+        for synset in synsets:
+            for name in synset.lemmas:
+                for token in tokenize(name):
+                    _add(words, token, w.synonym, f"synonym '{name}' of {lemma}")
+            for pos, offset in synset.derived:
+                for name in self.wordnet.synset(pos, offset).lemmas:
+                    for token in tokenize(name):
+                        _add(words, token, w.derived, f"related '{name}' of {lemma}")
+            for token in tokenize(synset.definition):
+                if token not in STOPWORDS and not is_number(token):
+                    _add(words, token, w.definition, f"definition of {lemma}")
+
+
+def _add(words: Dict[str, Tuple[float, str]], token: str, weight: float, origin: str) -> None:
+    if token not in words or words[token][0] < weight:
+        words[token] = (weight, origin)
+
+
+@dataclass
+class RankedRegion:
+    region: Region
+    score: float
+    explanation: str
+
+
+@dataclass
+class Recommendation:
+    phrase: str
+    results: List[RankedRegion]
+    oov_words: List[str] = field(default_factory=list)
+    fallbacks: List[str] = field(default_factory=list)
+
+
+class RegionRecommender:
+    """Ranks labelled regions for a phrase.
+
+    Args:
+        embed_words: words -> EmbeddedWords (unit vectors, SIF weights, fallback notes); None for
+            exact word matches and spelling only.
+        wordnet: expands labels (and, with `expand_query`, the query's words) with WordNet
+            synonyms, related words and definitions; None: the words as they are.
+        use_spelling: also match query words to label-name words by spelling.
+        expand_query: a query word may also match through its own WordNet words ("latte" ->
+            "coffee"), counted with their expansion weight.
+        method: "align" (each query word's best label word) or "mean" (cosine of weighted means).
+        weights: how much expanded words count.
+    """
+
+    def __init__(self, embed_words: Optional[EmbedWords], *, wordnet: Optional[WordNet] = None,
+                 use_spelling: bool = True, expand_query: bool = False, method: str = "align",
+                 weights: ExpansionWeights = ExpansionWeights(), min_spelling: float = 0.5,
+                 hubness: bool = False):
+        if method not in ("align", "mean"):
+            raise EmbeddingError(f"unknown method {method!r}; use 'align' or 'mean'")
+        self.embed_words = embed_words
+        self.expander = LabelExpander(wordnet, weights)
+        self.use_spelling = use_spelling
+        self.expand_query = expand_query and wordnet is not None
+        self.method = method
+        self.min_spelling = min_spelling
+        self.hubness = hubness and embed_words is not None
+        self._hub: Dict[str, float] = {}
+        self._hub_labels: Tuple[str, ...] = ()
+        self.regions: List[Region] = []
+        # label -> (words, weights, origins, name tokens)
+        self._labels: Dict[str, Tuple[List[str], np.ndarray, List[str], List[str]]] = {}
+        self._vectors: Dict[str, Optional[np.ndarray]] = {}
+
+    def set_regions(self, regions: Sequence[Region]) -> None:
+        """Use these regions from now on (label words are expanded and embedded once)."""
+        names = sorted({region.name for region in regions} - set(self._labels))
+        expansions = {name: self.expander.expand(name) for name in names}
+        self._embed_missing([w for words in expansions.values() for w in words])
+        for name, words in expansions.items():
+            ordered = sorted(words)
+            self._labels[name] = (ordered, np.array([words[w][0] for w in ordered]),
+                                  [words[w][1] for w in ordered], tokenize(name))
+        self.regions = list(regions)
+        label_set = tuple(sorted({r.name for r in regions}))
+        if self.hubness and label_set != self._hub_labels:  # only when the labels change
+            self._hub = self._hub_levels(list(label_set))
+            self._hub_labels = label_set
+
+    def _hub_levels(self, names: List[str]) -> Dict[str, float]:
+        """Per label: its mean best match with the other labels' words (CSLS-style hubness;
+        a label with many, generic words matches anything a little and is corrected down)."""
+        levels = {}
+        for name in names:
+            own = set(self._labels[name][0])
+            background = sorted({w for other in names if other != name
+                                 for w in self._labels[other][0]} - own)
+            vectors = [self._vectors.get(w) for w in background]
+            rows = np.array([v for v in vectors if v is not None])
+            if len(rows) == 0:
+                levels[name] = 0.0
+                continue
+            best, _ = self._matches(["?"] * len(rows), rows, name)
+            levels[name] = float(np.mean(best))
+        return levels
+
+    def _embed_missing(self, words: Sequence[str]) -> None:
+        missing = sorted(set(words) - set(self._vectors))
+        if not missing or self.embed_words is None:
+            return
+        embedded = self.embed_words(missing)
+        for word, vector, found in zip(missing, embedded.vectors, embedded.found):
+            self._vectors[word] = np.asarray(vector) if found else None
+
+    def recommend(self, phrase: str, top_k: int = 3) -> Recommendation:
+        """The `top_k` best regions (all when top_k <= 0), best first; EmptyPhraseError if empty."""
+        tokens = phrase_tokens(phrase)
+        everything = tokenize(phrase)
+        positions = [i for i, t in enumerate(everything) if t not in STOPWORDS]
+        positions = positions if len(positions) == len(tokens) else list(range(len(everything)))
+        expansions: List[Dict[str, Tuple[float, str]]] = [{} for _ in tokens]
+        if self.expand_query:
+            by_position = self.expander.expand_words(everything)
+            expansions = [by_position[i] for i in positions]
+        extra = sorted({w for e in expansions for w in e} - set(tokens))
+        if self.embed_words is not None:
+            embedded = self.embed_words(list(tokens) + extra)
+            query = EmbeddedWords(tokens, embedded.vectors[:len(tokens)],
+                                  embedded.weights[:len(tokens)], embedded.notes[:len(tokens)],
+                                  [w for w in embedded.oov if w in tokens])
+            rows = np.where(embedded.found[:, None], embedded.vectors, 0.0)
+        else:
+            query = EmbeddedWords(tokens, np.zeros((len(tokens), 1)), np.ones(len(tokens)),
+                                  [""] * len(tokens), [])
+            rows = None
+        row_words = list(tokens) + extra
+        scored = {name: self._score(query, expansions, row_words, rows, name)
+                  for name in {r.name for r in self.regions}}
+        ranked = sorted(self.regions, key=lambda r: (-scored[r.name][0], r.name, r.x, r.y))
+        if top_k > 0:
+            ranked = ranked[:top_k]
+        results = [RankedRegion(r, scored[r.name][0], scored[r.name][1]) for r in ranked]
+        return Recommendation(phrase, results, list(query.oov), [n for n in query.notes if n])
+
+    def _matches(self, row_words, rows, name) -> Tuple[np.ndarray, np.ndarray]:
+        """(best weighted similarity, index of the label word) of every row word to a label."""
+        words, weights, _, _ = self._labels[name]
+        # Equal words match fully, with or without vectors (a word the model lacks included).
+        sims = np.array([[float(r == w) for w in words] for r in row_words])
+        if rows is not None:
+            vectors = [self._vectors.get(w) for w in words]
+            usable = [i for i, v in enumerate(vectors) if v is not None]
+            if usable:
+                cosines = rows @ np.array([vectors[i] for i in usable]).T
+                sims[:, usable] = np.maximum(sims[:, usable], cosines)
+        sims = sims * weights[None, :]
+        best = sims.argmax(axis=1)
+        return sims[np.arange(len(row_words)), best], best
+
+    def _score(self, query: EmbeddedWords, expansions, row_words, rows, name) -> Tuple[float, str]:
+        words, weights, origins, name_tokens = self._labels[name]
+        if self.method == "mean" and rows is not None:
+            return self._mean_score(query, name)
+        best, where = self._matches(row_words, rows, name)
+        row_of = {w: i for i, w in enumerate(row_words)}
+        matches = best[:len(query.words)].copy()
+        reasons = [f"{q}~{words[where[i]]} ({origins[where[i]]})" if matches[i] > 0 else ""
+                   for i, q in enumerate(query.words)]
+        for i, word in enumerate(query.words):
+            for extra, (factor, origin) in expansions[i].items():
+                row = row_of[extra]
+                if factor * best[row] > matches[i]:
+                    matches[i] = factor * best[row]
+                    reasons[i] = (f"{word}->{extra} ({origin})~{words[where[row]]} "
+                                  f"({origins[where[row]]})")
+            if self.use_spelling:
+                spelled, token = max((spelling_similarity(word, t), t) for t in name_tokens)
+                if spelled >= self.min_spelling and spelled > matches[i]:
+                    matches[i] = spelled
+                    reasons[i] = f"{word}~{token} (spelling)"
+        score = float(np.sum(query.weights * matches) / np.sum(query.weights))
+        explanation = "; ".join(f"{r} {m:.2f}" for r, m in zip(reasons, matches) if r and m > 0)
+        if self.hubness and query.found.any():
+            # Only query words with vectors take part in vector matching, so only their share
+            # of the weight is corrected (a word nothing can embed matches no label either).
+            share = float(np.sum(query.weights[query.found]) / np.sum(query.weights))
+            score -= share * self._hub.get(name, 0.0)
+            explanation += f" (minus label hubness {share * self._hub.get(name, 0.0):.2f})"
+        return score, explanation
+
+    def _mean_score(self, query: EmbeddedWords, name: str) -> Tuple[float, str]:
+        words, weights, _, _ = self._labels[name]
+        usable = [(w, self._vectors.get(word)) for w, word in zip(weights, words)
+                  if self._vectors.get(word) is not None]
+        if not usable:
+            return 0.0, "no label word has a vector"
+        label = np.sum([w * v for w, v in usable], axis=0)
+        phrase = np.sum(query.weights[:, None] * query.vectors, axis=0)
+        denominator = np.linalg.norm(label) * np.linalg.norm(phrase)
+        score = float(label @ phrase / denominator) if denominator > 0 else 0.0
+        return score, f"cosine of mean vectors over {len(usable)} label words"

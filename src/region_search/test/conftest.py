@@ -1,0 +1,18 @@
+"""Markers of the region_search tests: `@pytest.mark.wordnet` skips a test when Debian's
+wordnet-base is not installed."""
+from pathlib import Path
+
+import pytest
+
+from region_search.corpora import DEFAULT_WORDNET_DIR
+
+WORDNET = Path(DEFAULT_WORDNET_DIR)
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "wordnet: needs Debian's wordnet-base (scripts/setup.sh)")
+
+
+def pytest_runtest_setup(item):
+    if item.get_closest_marker("wordnet") and not (WORDNET / "data.noun").is_file():
+        pytest.skip("Debian's wordnet-base is not installed (scripts/setup.sh)")

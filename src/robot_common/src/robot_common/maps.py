@@ -1,0 +1,175 @@
+"""Occupancy-grid maps in map_server conventions, without ROS.
+
+A `GridMap` stores cells as nav_msgs/OccupancyGrid does: row 0 is the bottom of the map (at the
+origin), values 0 (free) .. 100 (occupied) and -1 (unknown). Map files are map_server's
+`.yaml` + image pair (PGM), read and written with the same thresholds map_server uses.
+"""
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Tuple, Union
+
+import numpy as np
+import yaml
+
+from robot_common.errors import MapError
+
+FREE, OCCUPIED, UNKNOWN = 0, 100, -1
+PathLike = Union[str, Path]
+
+
+@dataclass
+class GridMap:
+    """An occupancy grid: `cells[row, col]`, row 0 at the origin (bottom of the image)."""
+
+    cells: np.ndarray
+    resolution: float
+    origin: Tuple[float, float, float] = (0.0, 0.0, 0.0)
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.cells = np.asarray(self.cells, dtype=np.int8)
+        if self.cells.ndim != 2 or self.cells.size == 0:
+            raise MapError(f"map cells must be a non-empty 2-D array, got shape {self.cells.shape}")
+        if not self.resolution > 0:
+            raise MapError(f"map resolution must be positive, got {self.resolution}")
+        if abs(self.origin[2]) > 1e-9:
+            raise MapError(f"rotated map origins are not supported (yaw {self.origin[2]})")
+
+    @property
+    def height(self) -> int:
+        return self.cells.shape[0]
+
+    @property
+    def width(self) -> int:
+        return self.cells.shape[1]
+
+    @property
+    def size_m(self) -> Tuple[float, float]:
+        """(width, height) in metres."""
+        return self.width * self.resolution, self.height * self.resolution
+
+    def free_mask(self) -> np.ndarray:
+        return self.cells == FREE
+
+    def world_to_cell(self, x, y):
+        """(row, col) indices of the cells holding world points (arrays or scalars)."""
+        col = np.floor((np.asarray(x) - self.origin[0]) / self.resolution).astype(int)
+        row = np.floor((np.asarray(y) - self.origin[1]) / self.resolution).astype(int)
+        return row, col
+
+    def cell_to_world(self, row, col):
+        """World (x, y) of cell centres."""
+        x = self.origin[0] + (np.asarray(col) + 0.5) * self.resolution
+        y = self.origin[1] + (np.asarray(row) + 0.5) * self.resolution
+        return x, y
+
+    def inside(self, row, col) -> np.ndarray:
+        row, col = np.asarray(row), np.asarray(col)
+        return (row >= 0) & (row < self.height) & (col >= 0) & (col < self.width)
+
+    def is_free(self, x, y) -> np.ndarray:
+        """True where world points fall in free cells (False outside the map)."""
+        row, col = self.world_to_cell(x, y)
+        inside = self.inside(row, col)
+        result = np.zeros(np.shape(row), dtype=bool)
+        result[inside] = self.cells[row[inside], col[inside]] == FREE
+        return result
+
+    def downsample(self, factor: int) -> "GridMap":
+        """A coarser map: a coarse cell is free only if all its fine cells are free,
+        occupied if any is occupied, otherwise unknown."""
+        if factor < 1 or int(factor) != factor:
+            raise MapError(f"downsample factor must be a positive integer, got {factor}")
+        if factor == 1:
+            return GridMap(self.cells.copy(), self.resolution, self.origin, dict(self.meta))
+        rows, cols = self.height // factor, self.width // factor
+        blocks = self.cells[:rows * factor, :cols * factor].reshape(rows, factor, cols, factor)
+        coarse = np.full((rows, cols), UNKNOWN, dtype=np.int8)
+        coarse[(blocks == FREE).all(axis=(1, 3))] = FREE
+        coarse[(blocks == OCCUPIED).any(axis=(1, 3))] = OCCUPIED
+        return GridMap(coarse, self.resolution * factor, self.origin, dict(self.meta))
+
+
+def load_map(yaml_path: PathLike) -> GridMap:
+    """Read a map_server map (`.yaml` naming a PGM/PNG image), as map_server's trinary mode does."""
+    yaml_path = Path(yaml_path)
+    try:
+        meta = yaml.safe_load(yaml_path.read_text())
+    except (OSError, yaml.YAMLError) as err:
+        raise MapError(f"cannot read map file {yaml_path}: {err}") from err
+    if not isinstance(meta, dict):
+        raise MapError(f"map file {yaml_path} is not a YAML mapping")
+    missing = [key for key in ("image", "resolution", "origin") if key not in meta]
+    if missing:
+        raise MapError(f"map file {yaml_path} lacks {', '.join(missing)}")
+    image_path = Path(meta["image"])
+    if not image_path.is_absolute():
+        image_path = yaml_path.parent / image_path
+    pixels = _read_grey_image(image_path)
+    occupancy = pixels.astype(float) / 255.0 if meta.get("negate", 0) else \
+        (255.0 - pixels.astype(float)) / 255.0
+    occupied_thresh = float(meta.get("occupied_thresh", 0.65))
+    free_thresh = float(meta.get("free_thresh", 0.196))
+    cells = np.full(pixels.shape, UNKNOWN, dtype=np.int8)
+    cells[occupancy > occupied_thresh] = OCCUPIED
+    cells[occupancy < free_thresh] = FREE
+    origin = tuple(float(v) for v in meta["origin"])
+    return GridMap(np.flipud(cells), float(meta["resolution"]), origin,
+                   {"source": str(yaml_path)})
+
+
+def save_map(grid: GridMap, yaml_path: PathLike) -> Path:
+    """Write `grid` as a map_server `.yaml` + `.pgm` pair; returns the yaml path."""
+    from PIL import Image
+
+    yaml_path = Path(yaml_path)
+    yaml_path.parent.mkdir(parents=True, exist_ok=True)
+    image_path = yaml_path.with_suffix(".pgm")
+    pixels = np.full(grid.cells.shape, 205, dtype=np.uint8)
+    pixels[grid.cells == FREE] = 254
+    pixels[grid.cells == OCCUPIED] = 0
+    Image.fromarray(np.flipud(pixels), mode="L").save(image_path)
+    meta = {"image": image_path.name, "resolution": float(grid.resolution),
+            "origin": [float(v) for v in grid.origin], "negate": 0,
+            "occupied_thresh": 0.65, "free_thresh": 0.196}
+    yaml_path.write_text(yaml.safe_dump(meta, default_flow_style=None, sort_keys=False))
+    return yaml_path
+
+
+def _read_grey_image(path: Path) -> np.ndarray:
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as image:
+            return np.asarray(image.convert("L"), dtype=np.uint8)
+    except (OSError, UnidentifiedImageError) as err:
+        raise MapError(f"cannot read map image {path}: {err}") from err
+
+
+def raycast(grid: GridMap, x: float, y: float, angles: np.ndarray, max_range: float) -> np.ndarray:
+    """Ranges from (x, y) along world-frame `angles` to the first occupied or unknown cell.
+
+    Samples each ray at half-cell steps (vectorised over all rays); rays that hit nothing
+    return `max_range`.
+    """
+    step = grid.resolution * 0.5
+    distances = np.arange(step, max_range + step, step)
+    xs = x + np.cos(angles)[:, None] * distances[None, :]
+    ys = y + np.sin(angles)[:, None] * distances[None, :]
+    row, col = grid.world_to_cell(xs, ys)
+    inside = grid.inside(row, col)
+    blocked = np.ones(row.shape, dtype=bool)
+    blocked[inside] = grid.cells[row[inside], col[inside]] != FREE
+    first = np.where(blocked.any(axis=1), blocked.argmax(axis=1), -1)
+    ranges = np.where(first >= 0, distances[np.maximum(first, 0)], max_range)
+    return np.minimum(ranges, max_range)
+
+
+def yaw_to_quaternion(yaw: float) -> Tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation about z."""
+    return 0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+
+
+def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))

@@ -1,0 +1,88 @@
+"""GridMap, map_server file I/O and ray casting, without ROS."""
+import math
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from robot_common import FREE, OCCUPIED, UNKNOWN, GridMap, MapError, load_map, raycast, save_map
+
+
+def write_map(tmp_path, pixels, **meta):
+    Image.fromarray(np.asarray(pixels, dtype=np.uint8), mode="L").save(tmp_path / "m.pgm")
+    fields = {"image": "m.pgm", "resolution": 0.5, "origin": [-1.0, 2.0, 0.0], "negate": 0,
+              "occupied_thresh": 0.65, "free_thresh": 0.196}
+    fields.update(meta)
+    (tmp_path / "m.yaml").write_text("\n".join(f"{k}: {v}" for k, v in fields.items()))
+    return tmp_path / "m.yaml"
+
+
+def test_load_applies_map_server_thresholds_and_flips_rows(tmp_path):
+    # map_server: occupancy = (255 - pixel) / 255; > occupied_thresh occupied, < free_thresh free.
+    # The image's first row is the top of the map, so it becomes the last grid row.
+    path = write_map(tmp_path, [[0, 254, 205], [255, 100, 89]])
+    grid = load_map(path)
+    assert grid.cells.tolist() == [[FREE, UNKNOWN, OCCUPIED], [OCCUPIED, FREE, UNKNOWN]]
+    assert grid.resolution == 0.5 and grid.origin == (-1.0, 2.0, 0.0)
+
+
+def test_negate_inverts_pixels(tmp_path):
+    grid = load_map(write_map(tmp_path, [[0, 255]], negate=1))
+    assert grid.cells.tolist() == [[FREE, OCCUPIED]]
+
+
+def test_save_then_load_gives_the_same_cells(tmp_path):
+    rng = np.random.default_rng(3)
+    cells = rng.choice([FREE, OCCUPIED, UNKNOWN], size=(17, 23)).astype(np.int8)
+    grid = GridMap(cells, 0.05, (1.5, -2.0, 0.0))
+    loaded = load_map(save_map(grid, tmp_path / "out" / "saved.yaml"))
+    np.testing.assert_array_equal(loaded.cells, cells)
+    assert loaded.resolution == pytest.approx(0.05) and loaded.origin == (1.5, -2.0, 0.0)
+
+
+def test_world_and_cell_coordinates_invert_each_other():
+    grid = GridMap(np.zeros((10, 20)), 0.25, (-2.0, 1.0, 0.0))
+    row, col = grid.world_to_cell(-2.0 + 0.25 * 7.5, 1.0 + 0.25 * 3.5)
+    assert (int(row), int(col)) == (3, 7)
+    x, y = grid.cell_to_world(3, 7)
+    assert (x, y) == pytest.approx((-2.0 + 0.25 * 7.5, 1.0 + 0.25 * 3.5))
+    assert not grid.is_free(-3.0, 0.0) and grid.is_free(x, y)
+
+
+def test_downsample_is_conservative():
+    cells = np.zeros((4, 4), dtype=np.int8)
+    cells[0, 0] = OCCUPIED
+    cells[3, 3] = UNKNOWN
+    coarse = GridMap(cells, 0.1).downsample(2)
+    assert coarse.cells.tolist() == [[OCCUPIED, FREE], [FREE, UNKNOWN]]
+    assert coarse.resolution == pytest.approx(0.2)
+
+
+def test_raycast_measures_distance_to_the_walls_of_a_box():
+    cells = np.full((100, 100), OCCUPIED, dtype=np.int8)
+    cells[1:99, 1:99] = FREE  # free interior from 0.1 m to 9.9 m
+    grid = GridMap(cells, 0.1)
+    angles = np.array([0.0, math.pi / 2, math.pi, -math.pi / 2])
+    ranges = raycast(grid, 3.0, 4.0, angles, max_range=20.0)
+    # Walls begin at 9.9 (east, north) and end at 0.1 (west, south); half-cell sampling.
+    np.testing.assert_allclose(ranges, [6.9, 5.9, 2.9, 3.9], atol=0.06)
+    assert raycast(grid, 3.0, 4.0, np.array([0.0]), max_range=2.0)[0] == pytest.approx(2.0)
+
+
+def test_real_building_map_loads(shared_data_dir):
+    grid = load_map(shared_data_dir / "maps" / "levine_6th.yaml")
+    assert (grid.width, grid.height) == (665, 589)
+    assert grid.resolution == pytest.approx(0.035)
+    free = grid.free_mask().mean()
+    assert 0.05 < free < 0.5, free
+
+
+@pytest.mark.parametrize("content, message", [
+    ("image: m.pgm\n", "lacks resolution, origin"),
+    ("[1, 2", "cannot read map file"),
+    ("image: missing.pgm\nresolution: 0.1\norigin: [0, 0, 0]\n", "cannot read map image"),
+])
+def test_bad_map_files_give_clear_errors(tmp_path, content, message):
+    (tmp_path / "bad.yaml").write_text(content)
+    with pytest.raises(MapError, match=message):
+        load_map(tmp_path / "bad.yaml")

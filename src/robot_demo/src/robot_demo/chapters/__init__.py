@@ -1,0 +1,1 @@
+"""Chapters of the workspace demo (robot_demo.app): each module has TITLE and run(demo)."""

@@ -1,0 +1,108 @@
+"""Crowd map (traffic_gp): a GP of people counts over the halls and the day, served as a cost map.
+
+Loads the demo's crowd model (or trains one on simulated robots, about a minute, once), starts
+the simulated robots and the crowd model server (which loads the model without retraining and
+keeps learning online), then compares its answers with the simulator's truth and checks the
+crowd cost map a costmap_2d static layer would read.
+"""
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+TITLE = "Crowd map: when and where people are in the halls (traffic_gp)"
+NODE = "/traffic_gp"
+WED = 48.0
+SEED = 0
+
+
+def model_file(demo):
+    """The demo's model; trained here when missing or of another format version."""
+    from traffic_gp.errors import ModelFormatError
+    from traffic_gp.persistence import read_header
+
+    path = demo.output / "crowd_model.npz"
+    try:
+        header = read_header(path)
+        print(f"  model: {path} ({header['n_steps']} steps on {header['n_rows']} rows; "
+              "loaded, not retrained)")
+        return path
+    except ModelFormatError:
+        pass
+    print("  model: none yet; training one on 6000 simulated robot views (once) ...", flush=True)
+    start = time.monotonic()
+    command = [sys.executable, "-m", "traffic_gp.sim.cli", "train", "--map", "generated:0",
+               "--views", "6000", "--weeks", "2", "--steps", "300", "--inducing", "300",
+               "--out", str(path), "--report", str(demo.output / "crowd")]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    if result.returncode != 0:
+        raise RuntimeError(f"training failed: {result.stderr.strip().splitlines()[-1:]}")
+    print("\n".join("    " + line for line in result.stdout.strip().splitlines()[-8:]))
+    print(f"  trained in {time.monotonic() - start:.0f} s; plots in {demo.output / 'crowd'}")
+    return path
+
+
+def run(demo) -> None:
+    import rospy
+    from nav_msgs.msg import OccupancyGrid
+
+    from robot_sim import generate_building
+    from robot_sim.configs import PeopleSimConfig
+    from robot_sim.people import PeopleSimulator
+    from robot_sim.ros_people import sim_stamp
+    from traffic_gp.sim.evaluation import showcase_cells
+    from traffic_gp.srv import PredictCount, PredictRegion
+
+    path = model_file(demo)
+    have_map = any(name == "/map" for name, _ in rospy.get_published_topics())
+    launch = demo.launch(demo.workspace_launch("crowd_sim.launch"), seed=SEED, with_map=not have_map,
+                         model_path=str(path), time_scale=60, start_hour=WED + 10.75,
+                         publish_period=2.0)
+    launch.wait_for_services([f"{NODE}/predict_count", f"{NODE}/predict_region"], timeout=90)
+    count = rospy.ServiceProxy(f"{NODE}/predict_count", PredictCount)
+    region = rospy.ServiceProxy(f"{NODE}/predict_region", PredictRegion)
+    # the truth of the simulated robots: the people simulator as people_sim.launch configures it
+    config = demo.sim_config(PeopleSimConfig, "people_sim.yaml")
+    sim = PeopleSimulator.from_building(generate_building(SEED), config.cell_size, seed=config.sim_seed)
+    cells = showcase_cells(sim)
+    print("  expected people per 0.5 m cell, model (90% interval of the count) vs truth:")
+    for label, hours in (("Wed 01:00", WED + 1.0), ("Wed 10:50", WED + 10 + 50 / 60)):
+        for name, index in cells.items():
+            answer = count(sim.cells.x[index], sim.cells.y[index], sim_stamp(hours, 0.0))
+            if not answer.success:
+                raise RuntimeError(answer.message)
+            truth = sim.expected_count(hours, [index])[0, 0]
+            print(f"    {label}  {name:14s} model {answer.expected_count:.3f} "
+                  f"[{answer.lower:.0f}, {answer.upper:.0f}]  truth {truth:.3f}")
+    hall = next(area for area in generate_building(SEED).halls if area.name == "main_hall")
+    x0, y0, x1, y1 = hall.box
+    from geometry_msgs.msg import Point32, Polygon
+
+    polygon = Polygon([Point32(x0, y0, 0), Point32(x1, y0, 0), Point32(x1, y1, 0),
+                       Point32(x0, y1, 0)])
+    inside = np.nonzero((sim.cells.x >= x0) & (sim.cells.x <= x1) & (sim.cells.y >= y0)
+                        & (sim.cells.y <= y1))[0]
+    for label, hours in (("Wed 01:00", WED + 1.0), ("Wed 10:50", WED + 10 + 50 / 60)):
+        answer = region(polygon, sim_stamp(hours, 0.0))
+        truth = sim.expected_count(hours, inside).sum()
+        print(f"  whole main hall at {label}: model {answer.expected_count:.1f} people "
+              f"[{answer.lower:.1f}, {answer.upper:.1f}] in {answer.cells} cells, truth {truth:.1f}")
+    grid = rospy.wait_for_message("/map", OccupancyGrid, 30)
+    crowd = rospy.wait_for_message(f"{NODE}/crowd_costmap", OccupancyGrid, 30)
+    values, walls = np.asarray(crowd.data), np.asarray(grid.data) == 100
+    print(f"  /traffic_gp/crowd_costmap: {crowd.info.width}x{crowd.info.height} at "
+          f"{crowd.info.resolution:.2f} m (same as /map: "
+          f"{(crowd.info.width, crowd.info.height) == (grid.info.width, grid.info.height)}), "
+          f"costs {values[~walls].min()}..{values[~walls].max()} on free cells, walls "
+          f"{'all -1' if np.all(values[walls] == -1) else 'NOT -1'} "
+          "(max over now + 30 min, for a static layer with use_maximum)")
+    from ros_harness import wait_until
+
+    def model_rows(message: str) -> int:            # "ok: model of N rows, S steps; ..."
+        return int(message.split("model of ")[1].split()[0])
+
+    first = count(10.0, 6.5, rospy.Time(0)).message
+    later = wait_until(lambda: (lambda m: m if model_rows(m) > model_rows(first) else None)(
+        count(10.0, 6.5, rospy.Time(0)).message), 90, what="the model to take in new counts")
+    print(f"  online learning from the simulated robots: '{first}' -> '{later}'")

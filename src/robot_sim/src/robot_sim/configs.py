@@ -1,0 +1,132 @@
+"""The parameters of robot_sim's simulator nodes, one `NodeConfig` class per node (no ROS).
+
+Each default is written here only: the YAML files in robot_sim's config/ that the launch files
+load are generated from these classes (`python -m robot_common.config_files --write`), and the
+nodes read their private parameters into them (`robot_common.ros_node.read_config`). Anything
+that must agree with a running simulator (the demo, tests) reads the same YAML into the same
+class with `load_config_file`.
+"""
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Type, TypeVar, Union
+
+import yaml
+
+from robot_common.errors import ConfigError
+from robot_common.params import NodeConfig, param
+
+__all__ = ["MapPublisherConfig", "SensorSimConfig", "UnicycleSimConfig", "PeopleSimConfig",
+           "DetectionSimConfig", "load_config_file"]
+
+ConfigT = TypeVar("ConfigT", bound=NodeConfig)
+
+_MAP_YAML_DOC = "map_server .yaml file; empty: the generated building floor of `seed`"
+
+
+@dataclass
+class MapPublisherConfig(NodeConfig):
+    """map_publisher: the map it publishes."""
+
+    map_yaml: str = param("", _MAP_YAML_DOC)
+    seed: int = param(0, "seed of the generated building")
+    frame_id: str = param("map", "frame of the map")
+    labels_path: str = param("", "if set, the generated building's labels are written there "
+                                 "(map_labelling JSON, for the region recommender)")
+
+
+@dataclass
+class SensorSimConfig(NodeConfig):
+    """sensor_sim: the patrolling mobile base and its sensors (a rate of 0 disables a topic)."""
+
+    map_yaml: str = param("", _MAP_YAML_DOC)
+    seed: int = param(0, "seed of the generated building")
+    speed: float = param(0.5, "patrol speed (m/s)")
+    waypoints: list = param([[0.0, 0.0], [1.0, 0.0]],
+                            "patrol [x, y] waypoints on a map file (the generated building: its hall)")
+    odom_rate: float = param(50.0, "odom rate (Hz)")
+    tf_rate: float = param(50.0, "odom -> base_link tf rate (Hz)")
+    scan_rate: float = param(10.0, "laser scan rate (Hz)")
+    image_rate: float = param(5.0, "camera image rate (Hz)")
+    joint_rate: float = param(20.0, "wheel joint states rate (Hz)")
+    scan_beams: int = param(360, "laser beams per scan")
+    scan_range: float = param(10.0, "laser range (m)")
+    image_width: int = param(320, "camera image width (pixels, rgb8)")
+    image_height: int = param(240, "camera image height (pixels)")
+    odom_frame: str = param("odom", "odometry frame")
+    base_frame: str = param("base_link", "robot base frame")
+    map_frame: str = param("map", "map frame (map -> odom is the identity)")
+
+
+@dataclass
+class UnicycleSimConfig(NodeConfig):
+    """unicycle_sim: the scenario, its episodes and the simulated clock."""
+
+    scenario: str = param("static_obstacle", "a scenario name (robot_sim config/scenarios) or YAML path")
+    seed: int = param(0, "seed of the random starts")
+    start: list = param([], "[x, y, yaw] of the first episode; []: a random start")
+    time_scale: float = param(1.0, "simulated seconds per wall-clock second")
+    command_timeout: float = param(0.5, "seconds after which a silent cmd_vel means stop")
+    odom_frame: str = param("odom", "odometry frame")
+    base_frame: str = param("base_link", "robot base frame")
+
+    def check(self) -> None:
+        if not self.time_scale > 0:
+            raise ConfigError(f"~time_scale must be positive, got {self.time_scale!r}")
+
+
+@dataclass
+class PeopleSimConfig(NodeConfig):
+    """people_sim: simulated robots counting people in the halls, in simulated time."""
+
+    map_yaml: str = param("", "map_server .yaml file; empty: the generated building of `seed` "
+                              "(or the `map` topic, see use_map_topic)")
+    use_map_topic: bool = param(False, "true: derive the halls from the first map on the `map` topic")
+    seed: int = param(0, "seed of the generated building")
+    sim_seed: int = param(1, "seed of the places, times and counts")
+    cell_size: float = param(0.5, "cell size (m)")
+    robots: int = param(3, "number of simulated robots", minimum=1)
+    rate: float = param(5.0, "views per wall-clock second, all robots together")
+    time_scale: float = param(60.0, "simulated seconds per wall-clock second")
+    start_hour: float = param(10.0, "hours since Monday 00:00 when the node starts")
+    utc_offset_hours: float = param(0.0, "stamps are simulated times in this time zone")
+    radius: float = param(4.0, "view radius (m)")
+    duration: float = param(0.0, "seconds per view (0: snapshots)")
+    total_counts: bool = param(False, "true: one count per view (radius mode) instead of per-cell counts")
+    frame_id: str = param("map", "frame of the positions")
+
+    def check(self) -> None:
+        if not (self.rate > 0 and self.time_scale > 0 and self.radius > 0):
+            raise ConfigError(f"~rate, ~time_scale and ~radius must be positive, got rate={self.rate}, "
+                              f"time_scale={self.time_scale}, radius={self.radius}")
+
+
+@dataclass
+class DetectionSimConfig(NodeConfig):
+    """object_detection_sim: the noisy detections of a generated building's objects and places."""
+
+    seed: int = param(0, "seed of the generated building")
+    random_seed: int = param(1, "seed of the detection noise")
+    mean_detections: float = param(20.0, "mean detections per object (Poisson)")
+    noise_std: float = param(0.1, "position noise (m)")
+    clutter_fraction: float = param(0.1, "fraction of detections that are clutter (< 1)")
+    extent_spread: bool = param(True, "detections anywhere on an object's extent")
+    with_size: bool = param(True, "report object sizes")
+    place_detections: int = param(5, "noisy sightings of every labelled place", minimum=0)
+    rate: float = param(500.0, "messages per second")
+    frame_id: str = param("map", "frame of the detections")
+    region_id: str = param("", "region id of every detection")
+
+    def check(self) -> None:
+        if not self.rate > 0:
+            raise ConfigError(f"~rate must be positive, got {self.rate!r}")
+
+
+def load_config_file(config_cls: Type[ConfigT], path: Union[str, Path]) -> ConfigT:
+    """The parameters a launch file loads from `path` (a generated config YAML), checked."""
+    try:
+        values = yaml.safe_load(Path(path).read_text()) or {}
+    except (OSError, yaml.YAMLError) as err:
+        raise ConfigError(f"cannot read parameter file {path}: {err}") from err
+    if not isinstance(values, dict):
+        raise ConfigError(f"parameter file {path} is not a YAML mapping")
+    return config_cls.from_mapping(values)

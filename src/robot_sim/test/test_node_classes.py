@@ -1,0 +1,87 @@
+"""The simulator nodes' parameter classes and node classes, without a ROS master."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from robot_common.errors import ConfigError, MapError
+from robot_sim.configs import (
+    DetectionSimConfig,
+    MapPublisherConfig,
+    PeopleSimConfig,
+    SensorSimConfig,
+    UnicycleSimConfig,
+    load_config_file,
+)
+from robot_sim.detections import building_detections, place_sightings
+from robot_sim.ros_detections import DetectionSim
+from robot_sim.ros_map_publisher import MapPublisher
+from robot_sim.ros_people import PeopleSimNode
+from robot_sim.ros_sensors import SensorSim
+from robot_sim.ros_unicycle import UnicycleSim
+
+CONFIG_DIR = Path(__file__).resolve().parents[1] / "config"
+FILES = {"map_publisher.yaml": MapPublisherConfig, "sensor_sim.yaml": SensorSimConfig,
+         "unicycle_sim.yaml": UnicycleSimConfig, "people_sim.yaml": PeopleSimConfig,
+         "object_detection_sim.yaml": DetectionSimConfig}
+
+
+@pytest.mark.parametrize("name", sorted(FILES))
+def test_the_launch_files_parameter_files_hold_the_class_defaults(name):
+    config_cls = FILES[name]
+    assert load_config_file(config_cls, CONFIG_DIR / name) == config_cls()
+
+
+def test_parameters_are_checked_by_name_type_and_range():
+    with pytest.raises(ConfigError, match="~robots must be >= 1"):
+        PeopleSimConfig.from_mapping({"robots": 0})
+    with pytest.raises(ConfigError, match="~rate, ~time_scale and ~radius must be positive"):
+        PeopleSimConfig.from_mapping({"time_scale": 0.0})
+    with pytest.raises(ConfigError, match="unknown parameter"):
+        SensorSimConfig.from_mapping({"scan_rays": 10})
+    with pytest.raises(ConfigError, match="~time_scale must be positive"):
+        UnicycleSimConfig.from_mapping({"time_scale": -1.0})
+    with pytest.raises(ConfigError, match="~rate must be positive"):
+        DetectionSimConfig.from_mapping({"rate": 0})
+    assert SensorSimConfig.from_mapping({"odom_rate": 0}).odom_rate == 0.0
+
+
+def test_a_missing_parameter_file_is_a_config_error(tmp_path):
+    with pytest.raises(ConfigError, match="cannot read parameter file"):
+        load_config_file(PeopleSimConfig, tmp_path / "none.yaml")
+
+
+def test_map_publisher_reads_the_generated_building_or_fails_on_a_missing_file(tmp_path):
+    publisher = MapPublisher(MapPublisherConfig(seed=2))
+    assert publisher.building is not None and publisher.grid is publisher.building.grid
+    with pytest.raises(MapError, match="cannot read map file"):
+        MapPublisher(MapPublisherConfig(map_yaml=str(tmp_path / "missing.yaml")))
+
+
+def test_sensor_sim_patrols_the_generated_hall_with_the_configured_sensors():
+    sim = SensorSim(SensorSimConfig(scan_beams=90, image_width=32, image_height=24))
+    state = sim.path.state(3.0)
+    assert len(sim.sensors.scan(state)) == 90
+    assert sim.sensors.image(state).shape == (24, 32, 3)
+
+
+def test_unicycle_sim_starts_where_it_is_told():
+    sim = UnicycleSim(UnicycleSimConfig(start=[0.5, 0.25, 0.0]))
+    assert sim.episode.state[:3].tolist() == [0.5, 0.25, 0.0]
+
+
+def test_detection_sim_publishes_what_building_detections_says():
+    config = DetectionSimConfig(mean_detections=3.0, place_detections=2)
+    sim = DetectionSim(config)
+    building, detections = building_detections(config)
+    sightings = place_sightings(building, config)
+    assert len(sim.objects) == len(detections) and len(sim.places) == len(sightings)
+    assert len(sightings) == 2 * len(building.labels)
+    assert sim.objects[0].class_name == detections.class_names[0]
+    assert np.isclose(sim.places[-1].position.x, sightings[-1][1][0])
+
+
+def test_people_sim_builds_the_generated_building_or_a_given_map():
+    node = PeopleSimNode(PeopleSimConfig(cell_size=1.0))
+    from_map = PeopleSimNode(PeopleSimConfig(cell_size=1.0), grid=node.sim.cells.grid)
+    assert from_map.sim.cells.n_cells == node.sim.cells.n_cells > 0

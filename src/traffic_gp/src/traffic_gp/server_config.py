@@ -1,0 +1,63 @@
+"""The crowd-model node's parameters (`traffic_server`, node name `traffic_gp`); no ROS here.
+
+`ServerConfig` is the one place their defaults and descriptions are written: the node reads it
+with `robot_common.ros_node.read_config`, and config/traffic_gp.yaml is generated from it
+(`python -m robot_common.config_files --write`). `utc_offset_hours` also accepts "" and "local"
+(the machine's local zone, like None) and a number written as a string.
+"""
+from dataclasses import dataclass
+from typing import Any, Mapping, Optional
+
+from robot_common.errors import ConfigError
+from robot_common.params import NodeConfig, param
+
+__all__ = ["ServerConfig", "LOCAL_ZONE"]
+
+LOCAL_ZONE = ("", "local")     # utc_offset_hours values that mean the machine's local zone
+
+
+@dataclass
+class ServerConfig(NodeConfig):
+    """Parameters of the crowd-model server (see `ros_traffic.TrafficServer`)."""
+
+    map_yaml: str = param("", "map_server .yaml of the map; empty: the map from the `map` topic")
+    cell_size: float = param(0.5, "cell side in metres (a whole number of map cells)")
+    model_path: str = param("", "model file: loaded at start if it exists (no retraining); "
+                                "~save_model writes here")
+    save_on_shutdown: bool = param(False, "save the model to model_path when the node stops")
+    utc_offset_hours: Optional[float] = param(
+        None, "time zone of the stamps, hours east of UTC; null, '' or 'local': the machine's zone")
+    clock: str = param("ros", "now is ROS time (ros) or the newest observation stamp "
+                              "(observations; simulations)", choices=("ros", "observations"))
+    dwell_time: float = param(20.0, "s; counts over a watch of d seconds: exposure x "
+                                    "(1 + d / dwell_time)")
+    min_rows: int = param(2000, "observation rows before the first fit")
+    initial_steps: int = param(600, "training steps of the first fit")
+    train_period: float = param(2.0, "s between training rounds")
+    chunk_steps: int = param(20, "training steps per lock hold (services wait at most one chunk)")
+    publish_period: float = param(5.0, "s between cost map publications")
+    lookahead_minutes: float = param(30.0, "minutes ahead the window cost map looks")
+    lookahead_step_minutes: float = param(5.0, "minutes between the times of the window cost map")
+    saturation_density: float = param(1.0, "people per m^2 that cost 95")
+    wall_value: int = param(-1, "value of walls and unknown cells: -1 (leave walls to the map's "
+                                "static layer) or 100 (lethal)", choices=(-1, 100))
+    full_resolution: bool = param(True, "cost maps at the map's resolution (a static layer "
+                                        "resizes to it)")
+    frame_id: str = param("map", "frame of the published cost maps")
+    model: dict = param({}, "TrafficGP keyword arguments (empty: TrafficGP's defaults)")
+
+    @classmethod
+    def from_mapping(cls, params: Optional[Mapping[str, Any]] = None, **kwargs) -> "ServerConfig":
+        """As `NodeConfig.from_mapping`; utc_offset_hours "" / "local" mean None (local zone)."""
+        params = dict(params or {})
+        offset = params.get("utc_offset_hours")
+        if isinstance(offset, str):
+            if offset in LOCAL_ZONE:
+                params["utc_offset_hours"] = None
+            else:
+                try:
+                    params["utc_offset_hours"] = float(offset)
+                except ValueError as err:
+                    raise ConfigError(f"~utc_offset_hours must be hours east of UTC or '' / "
+                                      f"'local', got {offset!r}") from err
+        return super().from_mapping(params, **kwargs)

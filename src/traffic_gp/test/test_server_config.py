@@ -1,0 +1,49 @@
+"""The node's parameters (no ROS master): defaults, the local-zone spellings, refused values,
+the generated YAML, and the one "not fitted" convention."""
+from pathlib import Path
+
+import pytest
+
+import robot_common.errors
+from robot_common.errors import ConfigError
+from traffic_gp.baselines import BinnedMean
+from traffic_gp.errors import NotFittedError, TrafficError
+from traffic_gp.server_config import ServerConfig
+
+CONFIG_YAML = Path(__file__).resolve().parents[1] / "config" / "traffic_gp.yaml"
+
+
+def test_defaults_are_the_documented_ones():
+    config = ServerConfig.from_mapping({})
+    assert (config.map_yaml, config.cell_size, config.model_path) == ("", 0.5, "")
+    assert config.utc_offset_hours is None and config.clock == "ros"
+    assert (config.min_rows, config.initial_steps, config.wall_value) == (2000, 600, -1)
+    assert config.model == {} and config.full_resolution and config.frame_id == "map"
+
+
+@pytest.mark.parametrize("value, expected", [("", None), ("local", None), (None, None), (0, 0.0),
+                                             (2, 2.0), (-3.5, -3.5), ("1.5", 1.5)])
+def test_utc_offset_accepts_the_local_zone_spellings_and_numbers(value, expected):
+    assert ServerConfig.from_mapping({"utc_offset_hours": value}).utc_offset_hours == expected
+
+
+@pytest.mark.parametrize("params, match", [
+    ({"clock": "wall"}, "clock"),
+    ({"wall_value": 50}, "wall_value"),
+    ({"utc_offset_hours": "Berlin"}, "utc_offset_hours"),
+    ({"min_rows": "many"}, "min_rows"),
+    ({"cel_size": 0.5}, "unknown parameter"),
+])
+def test_bad_parameters_are_refused_with_the_name(params, match):
+    with pytest.raises(ConfigError, match=match):
+        ServerConfig.from_mapping(params)
+
+
+def test_the_config_file_is_generated_from_the_class():
+    assert CONFIG_YAML.read_text() == ServerConfig.render_yaml(CONFIG_YAML.read_text().splitlines()[0][2:])
+
+
+def test_not_fitted_is_both_ours_and_the_workspace_convention():
+    with pytest.raises(robot_common.errors.NotFittedError):
+        BinnedMean(cells=None).predict(0.0, 0.0, 0.0)
+    assert issubclass(NotFittedError, TrafficError)
