@@ -28,6 +28,7 @@ test: setup
 	@scripts/in_env.sh bash scripts/run_tests.sh $(TEST_ARGS)
 
 bench: setup
+	@scripts/in_env.sh pip install -q -c constraints.txt -r bench/requirements-bench.txt
 	@scripts/in_env.sh bash bench/run_all.sh
 
 clean:

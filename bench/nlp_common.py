@@ -1,14 +1,20 @@
 """Shared helpers of the NLP region-search benchmarks: the evaluation set and top-k accuracy."""
 import json
+import math
+import os
 from pathlib import Path
-from typing import Callable, Dict, List, Sequence
+from typing import Callable, Dict, List, Sequence, Tuple
 
 import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 EVAL_FILE = ROOT / "bench" / "data" / "region_eval.yaml"
+# Phrases over the labels of a real floor (GRASP-ML's Towne/Levine labels), all held-out test.
+REAL_EVAL_FILE = ROOT / "bench" / "data" / "region_eval_real.yaml"
 OUT_DIR = ROOT / "artifacts" / "bench"
-BROWN_ZIP = ROOT.parent / "shared" / "data" / "corpora" / "brown.zip"
+SHARED_DATA = Path(os.environ.get("SHARED_DATA_DIR", str(ROOT.parent / "shared" / "data")))
+SHARED_MAPS = SHARED_DATA / "maps"
+BROWN_ZIP = SHARED_DATA / "corpora" / "brown.zip"
 
 # rank(phrase, labels) -> labels, best first
 Ranker = Callable[[str, Sequence[str]], List[str]]
@@ -22,6 +28,31 @@ def load_eval(path: Path = EVAL_FILE) -> Dict[str, dict]:
         for index, query in enumerate(building["queries"]):
             query["split"] = "test" if index % 2 else "dev"
     return data
+
+
+def load_real_eval(path: Path = REAL_EVAL_FILE) -> Dict[str, dict]:
+    """Like load_eval for a file whose buildings name a map_labelling `labels_file` (in
+    ../shared/data/maps, or $SHARED_DATA_DIR/maps)
+    and whose queries carry their own `split` (kept as written)."""
+    data = yaml.safe_load(Path(path).read_text())["buildings"]
+    for building in data.values():
+        labels = json.loads((SHARED_MAPS / building.pop("labels_file")).read_text())
+        building["labels"] = sorted(labels)
+        for query in building["queries"]:
+            missing = set(query["expected"]) - set(labels)
+            if missing or query.get("split") not in ("dev", "test"):
+                raise ValueError(f"{path}: bad query {query} (unknown labels {sorted(missing)})")
+    return data
+
+
+def wilson(successes: int, n: int, z: float = 1.959964) -> Tuple[float, float]:
+    """95% Wilson score interval of a proportion (successes of n)."""
+    if n == 0:
+        return float("nan"), float("nan")
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 def evaluate(rank: Ranker, buildings: Dict[str, dict]) -> dict:
@@ -40,9 +71,11 @@ def evaluate(rank: Ranker, buildings: Dict[str, dict]) -> dict:
         chosen = [r for r in rows if split == "all" or r["split"] == split]
         if not chosen:
             continue
-        summary[split] = {"n": len(chosen),
-                          "top1": sum(r["top1_ok"] for r in chosen) / len(chosen),
-                          "top3": sum(r["top3_ok"] for r in chosen) / len(chosen)}
+        hits1, hits3 = sum(r["top1_ok"] for r in chosen), sum(r["top3_ok"] for r in chosen)
+        summary[split] = {"n": len(chosen), "top1": hits1 / len(chosen),
+                          "top3": hits3 / len(chosen), "top1_hits": hits1, "top3_hits": hits3,
+                          "top1_ci95": wilson(hits1, len(chosen)),
+                          "top3_ci95": wilson(hits3, len(chosen))}
     return {"summary": summary, "queries": rows}
 
 

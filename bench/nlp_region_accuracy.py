@@ -21,6 +21,16 @@ Also: word2vec training time, and each backend's load time in a fresh process (i
     python bench/nlp_region_accuracy.py [--quick] [--brown PATH] [--retrain]
 
 Writes artifacts/bench/nlp_region_accuracy.json and nlp_region_accuracy.png.
+
+    python bench/nlp_region_accuracy.py --shipped [--cache-dir DIR] [--with-brown [--brown PATH]]
+
+The two shipped configurations only, as the nodes run them (the sentence backend with the phrase
+method; word2vec with `source` auto, i.e. what a robot without PyTorch gets: Brown + WordNet
+glosses when a Brown corpus is found (NLTK's places or --brown), else the glosses alone; word
+method with WordNet labels and hubness), on test queries never used for a choice:
+bench/data/region_eval_real.yaml (phrases over the labels of a real floor, all test) and the
+held-out test half of region_eval.yaml, each and pooled, top-1 / top-3 with 95% Wilson intervals.
+Writes artifacts/bench/nlp_region_accuracy_shipped.json and .png.
 """
 import argparse
 import json
@@ -30,7 +40,16 @@ import tempfile
 import time
 from pathlib import Path
 
-from nlp_common import BROWN_ZIP, OUT_DIR, evaluate, fresh_process_load_seconds, load_eval, write_json
+from nlp_common import (
+    BROWN_ZIP,
+    OUT_DIR,
+    evaluate,
+    fresh_process_load_seconds,
+    load_eval,
+    load_real_eval,
+    wilson,
+    write_json,
+)
 
 from region_search.corpora import WordNet
 from region_search.embeddings import WordEmbeddings
@@ -94,7 +113,17 @@ def main() -> int:
     parser.add_argument("--brown", default=str(BROWN_ZIP), help="Brown corpus (zip or folder)")
     parser.add_argument("--retrain", action="store_true",
                         help="train into a fresh temporary cache (measures training time)")
+    parser.add_argument("--shipped", action="store_true",
+                        help="only the two shipped configurations, on the held-out test sets, "
+                             "with 95%% Wilson intervals")
+    parser.add_argument("--with-brown", action="store_true",
+                        help="--shipped: word2vec auto with --brown (default: only a Brown corpus "
+                             "found where NLTK looks, as the nodes' default brown_path '')")
+    parser.add_argument("--cache-dir", default="",
+                        help="--shipped: word2vec model cache ('' = the default cache)")
     args = parser.parse_args()
+    if args.shipped:
+        return shipped(args)
     buildings = load_eval()
     n_queries = sum(len(b["queries"]) for b in buildings.values())
     print(f"evaluation set: {n_queries} queries over {len(buildings)} buildings "
@@ -135,6 +164,83 @@ def main() -> int:
     plot(results, OUT_DIR / "nlp_region_accuracy.png")
     print(f"\nwrote {path} and {OUT_DIR / 'nlp_region_accuracy.png'}")
     return 0
+
+
+def shipped(args) -> int:
+    """The shipped configurations on the test queries (see the module docstring)."""
+    wordnet = WordNet()
+    real = load_real_eval()
+    held_out = {name: dict(building, queries=[q for q in building["queries"] if q["split"] == "test"])
+                for name, building in load_eval().items()}
+    sets = {"real floor (Towne/Levine labels)": real, "region_eval.yaml test half": held_out}
+    sentence = load_sentence_model()
+    brown = args.brown if args.with_brown else ""  # "": where NLTK looks, as the nodes do
+    embeddings, info = load_embeddings("auto", brown_path=brown, params=Word2VecParams(),
+                                       cache_dir=args.cache_dir or None, progress=True)
+    configs = {
+        "sentence (phrase method)": PhraseRegionRecommender(sentence.embed_phrases, wordnet=wordnet),
+        f"word2vec auto = {'+'.join(info['corpora'])} (word method)": RegionRecommender(
+            embeddings.embed_words, wordnet=wordnet, hubness=True),
+    }
+    table, rows = {}, {}
+    for config, recommender in configs.items():
+        ranker = recommender_ranker(recommender)
+        for name, buildings in sets.items():
+            result = evaluate(ranker, buildings)
+            table[(config, name)] = result["summary"]["test"]
+            rows[(config, name)] = result["queries"]
+        pooled = rows[(config, list(sets)[0])] + rows[(config, list(sets)[1])]
+        hits1, hits3 = sum(r["top1_ok"] for r in pooled), sum(r["top3_ok"] for r in pooled)
+        table[(config, "pooled")] = {
+            "n": len(pooled), "top1": hits1 / len(pooled), "top3": hits3 / len(pooled),
+            "top1_hits": hits1, "top3_hits": hits3, "top1_ci95": wilson(hits1, len(pooled)),
+            "top3_ci95": wilson(hits3, len(pooled))}
+    print(f"\n{'configuration':44s} {'test set':34s} {'n':>3s}  {'top-1 (95% CI)':>20s}  "
+          f"{'top-3 (95% CI)':>20s}")
+    for (config, name), s in table.items():
+        cells = [f"{s[k]:4.0%} ({s[k + '_ci95'][0]:3.0%}-{s[k + '_ci95'][1]:4.0%})"
+                 for k in ("top1", "top3")]
+        print(f"{config:44s} {name:34s} {s['n']:3d}  {cells[0]:>20s}  {cells[1]:>20s}")
+    for (config, name), queries in rows.items():
+        misses = [r for r in queries if not r["top1_ok"]]
+        print(f"\n{config}, {name}: {len(misses)} top-1 misses")
+        for row in misses:
+            print(f"  {row['phrase']!r}: expected {row['expected']}, got {row['top3']}")
+    path = write_json("nlp_region_accuracy_shipped", {
+        "table": [dict(config=c, set=n, **s) for (c, n), s in table.items()],
+        "queries": [dict(config=c, set=n, **r) for (c, n), q in rows.items() for r in q],
+        "word2vec": {k: info[k] for k in ("corpora", "path", "cache_hit")},
+        "sentence": sentence.description, "load_average": os.getloadavg()})
+    plot_shipped(table, OUT_DIR / "nlp_region_accuracy_shipped.png")
+    print(f"\nwrote {path} and {OUT_DIR / 'nlp_region_accuracy_shipped.png'}")
+    return 0
+
+
+def plot_shipped(table, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    keys = list(table)
+    fig, ax = plt.subplots(figsize=(9, 0.5 * len(keys) + 1.5))
+    for offset, (metric, colour) in enumerate((("top1", "#3182bd"), ("top3", "#9ecae1"))):
+        ys = [i + 0.2 - 0.4 * offset for i in range(len(keys))]
+        values = [table[k][metric] for k in keys]
+        low = [table[k][metric] - table[k][metric + "_ci95"][0] for k in keys]
+        high = [table[k][metric + "_ci95"][1] - table[k][metric] for k in keys]
+        ax.barh(ys, values, height=0.4, color=colour, xerr=[low, high], capsize=3,
+                label=f"{metric[:3]}-{metric[3]} (95% Wilson CI)")
+    ax.axvline(0.9, color="red", linestyle="--", linewidth=1, label="target top-1 90%")
+    ax.set_yticks(list(range(len(keys))))
+    ax.set_yticklabels([f"{c}\n{n} (n={table[(c, n)]['n']})" for c, n in keys], fontsize=6)
+    ax.invert_yaxis()
+    ax.set_xlim(0, 1)
+    ax.set_xlabel("accuracy on held-out test queries")
+    ax.legend(loc="lower left", fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def report(results, models) -> None:

@@ -8,6 +8,11 @@
    bulk-insert rate for the same payloads (msgs/s, MB/s, ratio; target >= 0.5).
 3. replay: ros_mongo_retriever against `rosbag play` of the same data: p50/p99 of the inter-message
    gap error |received gap - recorded gap| per message pair (target: no worse than rosbag play).
+4. fault run (CouchDB through ros_harness.fault_proxy, a real proxy process in front of the real
+   server): the same load while the proxy answers 30 s of 401 (wrong password), then 30 s of 500
+   timeout, then recovers: messages lost (target 0), seconds from recovery until the spool is
+   drained, peak memory (VmHWM) of the recorder. `--only-fault` runs just this stage
+   (`--fault-seconds` sets each fault's length; quick: 5 s).
 
 Figures are printed, written to artifacts/bench/ros_mongo.json, plots to artifacts/bench/ros_mongo_*.png.
 """
@@ -34,6 +39,7 @@ from ros_mongo_bench_lib import (  # noqa: E402 - after the path set-up
     RecorderWatch,
     bag_counts,
     gap_errors,
+    peak_rss_mb,
     plot_results,
     raw_bulk_rate,
     recorded_times,
@@ -41,7 +47,7 @@ from ros_mongo_bench_lib import (  # noqa: E402 - after the path set-up
     subscribers_ready,
 )
 
-from ros_harness import ManagedProcess, RosCore, RosLaunch, wait_until  # noqa: E402
+from ros_harness import FaultProxy, ManagedProcess, RosCore, RosLaunch, wait_until  # noqa: E402
 from ros_mongo import open_store  # noqa: E402
 from ros_mongo.bagio import import_bag  # noqa: E402
 
@@ -101,6 +107,64 @@ def bench_record(core, url, work, duration, backend):
     result["megabytes"] = bag.stat().st_size / 1e6
     result["recorder_spooled"] = watch.count_at(watch.values, "spooled")
     return result
+
+
+def bench_fault(core, server, work, fault_seconds, settle=5.0):
+    """The recording load through the fault proxy: `fault_seconds` of 401, then of 500 timeout."""
+    logs = work / "logs"
+    proxy = FaultProxy(server.url, logs).start()
+    url = proxy.database_url("bench_fault")
+    name = "fault_recorder"
+    recorder = RosLaunch.node("ros_mongo", "ros_mongo_server", name=name, master_uri=core.uri, log_dir=logs,
+                              env=core.env(), params={
+                                  "db_url": url, "topics": list(TOPICS), "session_id": "bench_fault",
+                                  "spool_path": str(work / "fault.spool"), "diagnostics_period": 0.5,
+                                  "shutdown_timeout": 120.0}).start()
+    watch = RecorderWatch()
+    try:
+        wait_until(lambda: subscribers_ready(core.uri, TOPICS, 1), 60, what="recorder subscribed")
+        pid = recorder.node_pid(f"/{name}")
+        duration = settle + 2 * fault_seconds + settle
+        publisher = subprocess.Popen([sys.executable, str(PUBLISHER), "--duration", str(duration),
+                                      "--wait-subscribers", "1"], stdout=subprocess.PIPE, text=True,
+                                     env=core.env())
+        schedule = [(settle, {"auth": "wrong_password"}, "401 wrong password"),
+                    (settle + fault_seconds, {"timeout": "writes"}, "500 timeout"),
+                    (settle + 2 * fault_seconds, {}, "recovered")]
+        started, peak_pending, recovered_at = time.monotonic(), 0, None
+        for at, faults, what in schedule:
+            while time.monotonic() - started < at:
+                peak_pending = max(peak_pending, watch.count("spool_pending"))
+                time.sleep(0.2)
+            proxy.set(**faults)
+            say(f"  t={time.monotonic() - started:5.1f} s: {what} (stored {watch.count('stored')}, "
+                f"spool_pending {watch.count('spool_pending')})")
+            recovered_at = time.monotonic()
+        out, _ = publisher.communicate(timeout=duration + 300)
+        published = json.loads(out.strip().splitlines()[-1])
+        total = sum(published["published"].values())
+        wait_until(lambda: watch.count("received") >= total * 0.5 and watch.count("spool_pending") == 0
+                   and watch.count("queued") == 0
+                   and watch.count("stored") + watch.count("dropped") + watch.count("rejected")
+                   >= watch.count("received"), 900, interval=0.2, what="the spool drained")
+        drained = time.monotonic() - recovered_at
+        peak_mb = peak_rss_mb(pid)
+        final = dict(watch.values)
+        answered = proxy.state()["answered"]
+    finally:
+        recorder.stop(timeout=150)
+        watch.close()
+        proxy.stop()
+    with open_store(server.database_url("bench_fault")) as store:
+        stored = {t: store.count_messages(topic=t, session_id="bench_fault") for t in TOPICS}
+    return {"fault_seconds": fault_seconds, "published": published["published"],
+            "stored": stored, "lost": {t: published["published"][t] - stored[t] for t in TOPICS},
+            "lost_total": sum(published["published"][t] - stored[t] for t in TOPICS),
+            "drain_seconds_after_recovery": drained, "peak_rss_mb": peak_mb,
+            "peak_spool_pending": peak_pending,
+            "counts": {k: final.get(k) for k in ("received", "stored", "dropped", "rejected", "quarantined",
+                                                 "spooled", "writer_restarts")},
+            "answered_by_proxy": answered}
 
 
 def _rates(stored, published, seconds):
@@ -183,6 +247,14 @@ def report(results):
             f"{imp['import_msgs_per_s']:.0f} msgs/s, {imp['import_mb_per_s']:.1f} MB/s; raw bulk insert "
             f"{imp['raw_msgs_per_s']:.0f} msgs/s, {imp['raw_mb_per_s']:.1f} MB/s; ratio "
             f"{imp['ratio_msgs']:.2f} (msgs) {imp['ratio_mb']:.2f} (MB)")
+    fault = results.get("fault")
+    if fault:
+        seconds = fault["fault_seconds"]
+        say(f"fault run (CouchDB; {seconds:.0f} s of 401 then {seconds:.0f} s of 500 timeout): published "
+            f"{sum(fault['published'].values())}, lost {fault['lost_total']} "
+            f"{fault['lost']} (target 0); spool drained {fault['drain_seconds_after_recovery']:.1f} s after "
+            f"recovery (peak {fault['peak_spool_pending']} pending); recorder peak RSS "
+            f"{fault['peak_rss_mb']:.0f} MB; counts {fault['counts']}")
     for who, rep in results.get("replay", {}).items():
         total = rep["all"]
         per_run = ", ".join(f"{v:.2f}" for v in rep["p99_ms_per_run"])
@@ -208,9 +280,15 @@ def main(argv=None):
                         help="replays of each kind, alternating (default 3)")
     parser.add_argument("--retriever-param", nargs="*", default=[], metavar="KEY=YAML",
                         help="extra ros_mongo_retriever parameters for the replay stage")
+    parser.add_argument("--fault-seconds", type=float, help="length of each injected fault (default 30, "
+                        "quick 5)")
+    parser.add_argument("--only-fault", action="store_true", help="run only the fault run")
     args = parser.parse_args(argv)
     duration = args.duration or (4.0 if args.quick else 20.0)
     backends = args.backends or (["couchdb"] if args.quick else list(BACKENDS))
+    fault_seconds = args.fault_seconds or (5.0 if args.quick else 30.0)
+    if args.only_fault:
+        backends = ["couchdb"]
     args.output.mkdir(parents=True, exist_ok=True)
     work = args.output / "ros_mongo_work"
     if args.bag is not None:
@@ -227,6 +305,12 @@ def main(argv=None):
     load = os.getloadavg()
     results = {"duration": duration, "load_before": load, "cpus": os.cpu_count(), "record": {}}
     try:
+        if args.only_fault or args.bag is None:
+            say(f"fault run: {fault_seconds:.0f} s of 401, {fault_seconds:.0f} s of 500 timeout ...")
+            results["fault"] = bench_fault(core, servers["couchdb"], work, fault_seconds) \
+                if "couchdb" in servers else None
+        if args.only_fault:
+            return _finish(args, results, work, load, servers, core, name="ros_mongo_fault.json")
         for backend in backends if args.bag is None else []:
             say(f"record: {backend}, {duration:.0f} s of publishing ...")
             results["record"][backend] = bench_record(core, servers[backend].database_url("bench"), work,
@@ -238,17 +322,30 @@ def main(argv=None):
         extra = {k: yaml.safe_load(v) for k, v in (p.split("=", 1) for p in args.retriever_param)}
         results["replay"] = bench_replay(core, bag, servers[backends[0]].database_url("bench"), work, extra,
                                          args.replay_repeats)
-    finally:
-        rospy.signal_shutdown("bench finished")
-        for server in servers.values():
-            server.stop()
-        core.stop()
-        results["load_after"] = os.getloadavg()
+    except BaseException:
+        _stop(servers, core, results)
+        raise
+    return _finish(args, results, work, load, servers, core)
+
+
+def _stop(servers, core, results):
+    import rospy
+
+    rospy.signal_shutdown("bench finished")
+    for server in servers.values():
+        server.stop()
+    core.stop()
+    results["load_after"] = os.getloadavg()
+
+
+def _finish(args, results, work, load, servers, core, name="ros_mongo.json"):
+    _stop(servers, core, results)
     report(results)
-    (args.output / "ros_mongo.json").write_text(json.dumps(results, indent=1, default=str))
-    plot_results(results, args.output)
+    (args.output / name).write_text(json.dumps(results, indent=1, default=str))
+    if name == "ros_mongo.json":
+        plot_results(results, args.output)
     say(f"\nload average before {load[0]:.1f}, after {results['load_after'][0]:.1f} ({os.cpu_count()} CPUs); "
-        f"figures in {args.output / 'ros_mongo.json'}")
+        f"figures in {args.output / name}")
     if not args.keep:
         shutil.rmtree(work, ignore_errors=True)
     return 0

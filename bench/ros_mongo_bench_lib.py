@@ -57,6 +57,14 @@ class RecorderWatch:
         self.subscriber.unregister()
 
 
+def peak_rss_mb(pid: int) -> float:
+    """The peak resident memory (VmHWM) of a running process, in MB."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024.0
+    raise RuntimeError(f"no VmHWM for process {pid}")
+
+
 def _seq(raw: bytes) -> int:
     return struct.unpack_from("<I", raw, 0)[0]  # header.seq: the publisher's index
 

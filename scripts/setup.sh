@@ -20,8 +20,8 @@ APT_PACKAGES=(
   python3-std-msgs python3-geometry-msgs python3-sensor-msgs python3-nav-msgs
   python3-visualization-msgs python3-diagnostic-msgs python3-std-srvs python3-tf2-ros
   python3-tf2-geometry-msgs
-  # build tools catkin_make needs
-  cmake g++ make
+  # build tools catkin_make needs, and catkin_lint (tests/test_manifests.py lints every package)
+  cmake g++ make catkin-lint
   # the virtual environment
   python3-venv
   # rviz, headless (tests take screenshots under Xvfb)

@@ -102,7 +102,7 @@ def test_demo_launch_brings_up_the_whole_stack_and_each_part_works(stack, rospy_
     def moved() -> bool:
         held.header.stamp = rospy.Time.now()
         joy.publish(held)
-        now = rospy_node.wait_for_message("/lfd/odom", Odometry, timeout=5).pose.pose.position
+        now = rospy_node.wait_for_message("/lfd/odom", Odometry, timeout=60).pose.pose.position
         return math.hypot(now.x - start.x, now.y - start.y) > 0.2
 
     wait_until(moved, timeout=30, what="the /lfd robot moving under joystick teleop")

@@ -162,6 +162,72 @@ def test_batch_mode_gives_bit_identical_models_for_any_order():
     assert match_scores(models[0].means_[models[0].confirmed_], truth)["recall"] == 1.0
 
 
+def _chunkings(n, count, rng):
+    """`count` random orders of n rows, each split into 1-8 chunks at random places."""
+    for _ in range(count):
+        order = rng.permutation(n)
+        cuts = np.sort(rng.choice(np.arange(1, n), int(rng.integers(0, 8)), replace=False))
+        yield np.split(order, cuts)
+
+
+def _fit_in_chunks(chunks, X, weights, batch):
+    model = IncrementalGMM(covariance_scale=0.01, data_range=20, batch=batch)
+    for part in chunks:
+        model.partial_fit(X[part], weights[part])
+    return model
+
+
+def test_batch_mode_is_the_same_for_the_same_data_in_any_chunks_and_orders():
+    # dense scene: 25 objects 1 m apart, 10 detections each, 0.15 m noise, 10% clutter
+    scene = random_scene(25, bounds=[(0, 20), (0, 20)], min_separation=1.0, random_state=3)
+    dets = simulate_detections(scene, mean_detections=10, noise_std=0.15, clutter_fraction=0.1,
+                               random_state=4)
+    X, weights = dets.positions, dets.confidences
+    rng = np.random.default_rng(1)
+    chunkings = list(_chunkings(len(X), 8, rng))
+    assert len({len(chunks) for chunks in chunkings}) > 2  # different numbers of calls
+    one_call = IncrementalGMM(covariance_scale=0.01, data_range=20, batch=True).fit(X, weights)
+    for chunks in chunkings:
+        model = _fit_in_chunks(chunks, X, weights, batch=True)
+        assert model.n_batch_rows_ == len(X) and model.n_samples_seen_ == len(X)
+        assert model.confirmed_.sum() == one_call.confirmed_.sum()
+        np.testing.assert_array_equal(model.means_, one_call.means_)
+        np.testing.assert_array_equal(model.covariances_, one_call.covariances_)
+        np.testing.assert_array_equal(model.support_, one_call.support_)
+    # the same chunkings learnt sequentially give different cluster counts: the check can fail
+    counts = {int(_fit_in_chunks(chunks, X, weights, batch=False).confirmed_.sum()) for chunks in chunkings}
+    assert len(counts) > 1
+    truth = np.array([obj.position for obj in scene])
+    assert match_scores(one_call.means_[one_call.confirmed_], truth)["recall"] >= 0.9
+
+
+def test_batch_mode_keeps_its_rows_through_bad_input_and_consolidate_starts_afresh():
+    truth, dets = _scene(2)
+    X = dets.positions
+    model = IncrementalGMM(covariance_scale=0.01, data_range=20, batch=True).partial_fit(X[:100])
+    before = model.to_dict()
+    with pytest.raises(InvalidInputError, match="NaN"):
+        model.partial_fit(np.array([[1.0, float("nan")]]))
+    assert model.n_batch_rows_ == 100 and model.to_dict() == before
+    model.partial_fit(X[100:])
+    whole = IncrementalGMM(covariance_scale=0.01, data_range=20, batch=True).fit(X[::-1])
+    np.testing.assert_array_equal(model.means_, whole.means_)
+    # consolidate: the current model becomes the starting point; later chunks relearn from it
+    model.consolidate()
+    assert model.n_batch_rows_ == 0
+    extra = X[:50] + 0.01
+    a = IncrementalGMM.from_dict(model.to_dict()).set_params(batch=True)
+    for part in (extra[:10], extra[10:]):
+        model.partial_fit(part)
+    a.partial_fit(extra[::-1])
+    assert model.n_batch_rows_ == 50
+    np.testing.assert_allclose(model.means_, a.means_, rtol=0, atol=1e-9)
+    assert model.n_components_ == a.n_components_
+    # switching batch mode off consolidates too
+    model.set_params(batch=False)
+    assert model.n_batch_rows_ == 0
+
+
 @pytest.mark.parametrize("batch", [False, True])
 def test_learns_simulated_scenes_with_clutter(batch):
     for seed in range(4):

@@ -78,15 +78,17 @@ def test_pair_likelihood_overlap_and_distance_weighted_by_hand():
     # overlap: sum w_a w_b N(mu_a; mu_b, C_a + C_b); variances add: 0.2 and 0.3
     overlap = 0.5 * math.exp(-0.5 * 1 / 0.2) / (2 * math.pi * 0.2) + \
         0.5 * math.exp(-0.5 * 4 / 0.3) / (2 * math.pi * 0.3)
-    value, method, pairs = pair_likelihood(a, b)
+    value, method, pairs = pair_likelihood(a, b, method="overlap")
     assert (method, pairs) == ("overlap", 2) and value == pytest.approx(overlap)
     # original: mean of N(mu_a; mu_b, C_b) weighted by exp(-d)
     p1, p2 = math.exp(-0.5 / 0.1) / (2 * math.pi * 0.1), math.exp(-0.5 * 4 / 0.2) / (2 * math.pi * 0.2)
     expected = (math.exp(-1) * p1 + math.exp(-2) * p2) / (math.exp(-1) + math.exp(-2))
     value, method, pairs = pair_likelihood(a, b, method="distance_weighted")
     assert method == "distance_weighted" and value == pytest.approx(expected)
+    assert pair_likelihood(a, b) == (value, "distance_weighted", 2)  # the default: the report's definition
     assert pair_likelihood(a, b, max_distance=10.0)[2] == 3
-    assert pair_likelihood(a, table([("sink", (1, 0), 0.1, 1, 5, [1])], region="r2")) == (0.0, "overlap", 0)
+    other_region = table([("sink", (1, 0), 0.1, 1, 5, [1])], region="r2")
+    assert pair_likelihood(a, other_region) == (0.0, "distance_weighted", 0)
     with pytest.raises(InvalidInputError, match="unknown method"):
         pair_likelihood(a, b, method="cosine")
     with pytest.raises(InvalidInputError, match="max_distance"):
@@ -99,7 +101,7 @@ def test_alternate_classes_ranks_the_nearest_class_first():
               "kettle": table([("kettle", (1.5, 0), 0.1, 1, 5, [1])]),
               "sofa": table([("sofa", (30, 0), 0.1, 1, 5, [1])])}
     ranked, method = alternate_classes(tables.__getitem__, "mug", sorted(tables))
-    assert [name for name, _ in ranked] == ["sink", "kettle"] and method == "overlap"
+    assert [name for name, _ in ranked] == ["sink", "kettle"] and method == "distance_weighted"
 
 
 def test_count_observed_in_a_time_window_near_a_point():

@@ -19,10 +19,12 @@ def _random_trajectory(seed, count=12):
     return scenario, start, actions
 
 
+@pytest.mark.parametrize("person", [False, True])
 @pytest.mark.parametrize("seed", range(3))
-def test_feature_gradients_and_hessians_match_finite_differences(seed):
+def test_feature_gradients_and_hessians_match_finite_differences(seed, person):
     rng = np.random.default_rng(seed)
-    features, task = FeatureSet(), Task.from_scenario(load_scenario("moving_obstacle"))
+    features = FeatureSet(forward_command=person, obstacle_facing=person, goal_slowing=person)
+    task = Task.from_scenario(load_scenario("moving_obstacle"))
     states = np.column_stack([rng.uniform(-2.5, 0.5, 6), rng.uniform(-1.2, 1.2, 6),
                               rng.uniform(-3, 3, 6), rng.uniform(-0.5, 0.5, 6), rng.uniform(-1, 1, 6)])
     actions, times = rng.uniform(-1, 1, (6, 2)), rng.uniform(0, 8, 6)

@@ -60,7 +60,13 @@ SERVICES = ["/embedding_server/embed", "/embedding_server/similarity",
             "/region_recommender/recommend"]
 
 
-def start_region_search(roslaunch, files, **args):
+def wait_for_model(rospy_node, timeout):
+    """The services are advertised at once; the model is ready when ~active_backend is set."""
+    wait_until(lambda: rospy_node.has_param("/embedding_server/active_backend"), timeout,
+               what="the embedding server's model to be ready (~active_backend set)")
+
+
+def start_region_search(roslaunch, rospy_node, files, **args):
     """region_search.launch serving the hand-made word2vec space (unless `args` say otherwise)."""
     settings = dict(backend="word2vec", source="pretrained",
                     pretrained_path=str(files / "vectors.txt"), cache_dir=str(files / "cache"),
@@ -68,11 +74,13 @@ def start_region_search(roslaunch, files, **args):
     settings.update(args)
     launch = roslaunch("region_search", "region_search.launch", **settings)
     launch.wait_for_services(SERVICES, timeout=90)
+    wait_for_model(rospy_node, 120)
     return launch
 
 
 def test_phrases_find_their_labelled_regions_with_positions(roslaunch, rospy_node, files, building):
-    start_region_search(roslaunch, files, labels_path=str(files / "labels.json"), layer_service="")
+    start_region_search(roslaunch, rospy_node, files, labels_path=str(files / "labels.json"),
+                        layer_service="")
     recommend = rospy_node.ServiceProxy("/region_recommender/recommend", RecommendRegion)
     for phrase, best in [("drinking fountain", "water_fountain"), ("wash my hands", "bathroom"),
                          ("somewhere to print a poster", "printer_room"),
@@ -120,7 +128,7 @@ def check_embedding_server_answers_vectors_and_batch_similarity(rospy_node):
 
 
 def test_empty_phrase_and_missing_labels_get_success_false(roslaunch, rospy_node, files):
-    start_region_search(roslaunch, files, labels_path=str(files / "no_such_labels.json"),
+    start_region_search(roslaunch, rospy_node, files, labels_path=str(files / "no_such_labels.json"),
                         layer_service="")
     recommend = rospy_node.ServiceProxy("/region_recommender/recommend", RecommendRegion)
     response = recommend(phrase="drinking fountain", top_k=1)
@@ -143,7 +151,7 @@ def test_regions_layer_of_the_layer_server_is_searched_too(roslaunch, rospy_node
     of "water_fountain" are learnt by its regions layer and found by the recommender."""
     layer = roslaunch("igmm_layers", "igmm_layers.launch")  # the layer server's shipped defaults
     layer.wait_for_services(["/igmm_layers/locate_objects"], timeout=60)
-    start_region_search(roslaunch, files, labels_path="")
+    start_region_search(roslaunch, rospy_node, files, labels_path="")
     publisher = rospy_node.Publisher("/igmm_layers/place_observations", ObjectObservation,
                                      queue_size=100)
     wait_until(lambda: publisher.get_num_connections() > 0, 30, what="layer server subscription")
@@ -171,6 +179,7 @@ def test_the_default_sentence_backend_ranks_phrases_through_the_services(roslaun
     launch = roslaunch("region_search", "region_search.launch", labels_path=str(files / "labels.json"),
                        layer_service="")
     launch.wait_for_services(SERVICES, timeout=120)
+    wait_for_model(rospy_node, 300)
     assert rospy_node.get_param("/embedding_server/active_backend") == "sentence"
     recommend = rospy_node.ServiceProxy("/region_recommender/recommend", RecommendRegion)
     for phrase, best in [("where can I get a drink of water", "water_fountain"),
@@ -210,7 +219,7 @@ def test_a_missing_sentence_model_falls_back_to_word2vec_or_stops_with_a_clear_e
     no_model.mkdir()
     strict = roslaunch.node("region_search", "embedding_server", name="strict_embedding_server",
                             params={"model_path": str(no_model), "fallback": False})
-    launch = start_region_search(roslaunch, files, backend="sentence", model_path=str(no_model),
+    launch = start_region_search(roslaunch, rospy_node, files, backend="sentence", model_path=str(no_model),
                                  labels_path=str(files / "labels.json"), layer_service="")
     assert rospy_node.get_param("/embedding_server/active_backend") == "word2vec"
     embed = rospy_node.ServiceProxy("/embedding_server/embed", Embed)(phrases=["water fountain"])

@@ -58,7 +58,7 @@ class Sender:
         self.rate, self.sent, self._stop = rate, 0, threading.Event()
         self._thread = None
 
-    def connected(self, timeout=20):
+    def connected(self, timeout=60):
         wait_until(lambda: self.publisher.get_num_connections() > 0, timeout, what="recorder subscribed")
         return self
 
@@ -113,10 +113,10 @@ def test_recorder_stores_all_types_new_topics_and_original_tags(roslaunch, db_ur
     publishers = {t: rospy.Publisher(t, kinds[t], queue_size=10) for t in sent}  # /extra appears later
     launch.wait_for_subscribers(list(sent))
     for topic, publisher in publishers.items():
-        wait_until(lambda p=publisher: p.get_num_connections() > 0, 20, what=f"{topic} connected")
+        wait_until(lambda p=publisher: p.get_num_connections() > 0, 60, what=f"{topic} connected")
         for _ in range(3):
             publisher.publish(sent[topic])
-    wait_until(lambda: diagnostics.count("stored") == 15, 30, what="15 stored messages")
+    wait_until(lambda: diagnostics.count("stored") == 15, 90, what="15 stored messages")
     with open_store(db_url) as store:
         for topic, msg in sent.items():
             stored = list(store.find_messages(topic=topic))
@@ -138,13 +138,13 @@ def test_database_outage_mid_stream_stores_each_message_once(roslaunch, own_db_s
     url = own_db_server.database_url("robot_data")
     recorder(roslaunch, url, tmp_path)
     sender = Sender(rate=200.0).connected().start(800)  # 4 s of messages
-    wait_until(lambda: diagnostics.count("stored") >= 100, 20, what="first messages stored")
+    wait_until(lambda: diagnostics.count("stored") >= 100, 60, what="first messages stored")
     own_db_server.stop()
-    wait_until(lambda: diagnostics.count("spool_pending") >= 100, 20, what="messages spooled")
+    wait_until(lambda: diagnostics.count("spool_pending") >= 100, 60, what="messages spooled")
     own_db_server.start()
     sender.join()
     wait_until(lambda: diagnostics.count("stored") == 800 and diagnostics.count("spool_pending") == 0,
-               90, what="every message stored")
+               180, what="every message stored")
     assert stored_xs(url) == [float(i) for i in range(800)]
     assert diagnostics.count("spooled") >= 100 and diagnostics.count("dropped") == 0
     sender.close()
@@ -153,7 +153,7 @@ def test_database_outage_mid_stream_stores_each_message_once(roslaunch, own_db_s
 def test_sigkill_loses_only_unacknowledged_messages(roslaunch, db_url, tmp_path, diagnostics):
     launch = recorder(roslaunch, db_url, tmp_path, batch_period=0.2)
     sender = Sender(rate=400.0).connected().start(4000)
-    wait_until(lambda: diagnostics.count("stored") >= 400, 20, what="messages stored")
+    wait_until(lambda: diagnostics.count("stored") >= 400, 60, what="messages stored")
     acknowledged = diagnostics.count("stored") + diagnostics.count("spool_pending")
     os.kill(launch.node_pid(launch.node_name), signal.SIGKILL)
     sent = sender.sent
@@ -171,15 +171,15 @@ def test_sigkill_while_spooling_then_restart_drains_the_spool(roslaunch, own_cou
     launch = recorder(roslaunch, url, tmp_path)
     sender = Sender(rate=500.0).connected()
     sender.send(100)
-    wait_until(lambda: diagnostics.count("stored") == 100, 20, what="100 stored")
+    wait_until(lambda: diagnostics.count("stored") == 100, 60, what="100 stored")
     own_couchdb_server.stop()
     sender.send(200)
-    wait_until(lambda: diagnostics.count("spool_pending") == 200, 20, what="200 spooled")
+    wait_until(lambda: diagnostics.count("spool_pending") == 200, 60, what="200 spooled")
     os.kill(launch.node_pid(launch.node_name), signal.SIGKILL)
     own_couchdb_server.start()
     diagnostics.values = {}
     recorder(roslaunch, url, tmp_path)  # same spool path
-    wait_until(lambda: diagnostics.count("stored") == 200 and diagnostics.count("spool_pending") == 0, 30,
+    wait_until(lambda: diagnostics.count("stored") == 200 and diagnostics.count("spool_pending") == 0, 90,
                what="the spool drained")
     assert stored_xs(url) == [float(i) for i in range(300)]
     sender.close()
@@ -233,7 +233,7 @@ def test_retriever_replays_exact_bytes_with_recorded_timing(roslaunch, db_url, r
     assert not bad.success and "unknown operator '$near'" in bad.message
     assert not start("colour red").success
     assert start("").success
-    wait_until(lambda: all(len(collector.got[o]) == len(sent[t]) for o, t in outputs.items()), 30,
+    wait_until(lambda: all(len(collector.got[o]) == len(sent[t]) for o, t in outputs.items()), 90,
                what="every message replayed")
     for output, topic in outputs.items():
         assert [raw for _, raw, _ in collector.got[output]] == sent[topic]
@@ -258,7 +258,7 @@ def test_retriever_offset_loop_fixed_rate_and_clock(roslaunch, couchdb_url, rosp
     launch.wait_for_services([f"/{name}/stop"])
     got = collector.got["/odom_replayed"]
     try:
-        wait_until(lambda: len(got) >= 45, 30, what="two loops")
+        wait_until(lambda: len(got) >= 45, 90, what="two loops")
     except TimeoutError as err:
         raise AssertionError(f"{err}; got {len(got)}\n{launch.log_tail()}") from None
     assert "stopped after" in rospy.ServiceProxy(f"/{name}/stop", Trigger)().message
@@ -274,14 +274,14 @@ def test_original_launch_files_record_and_retrieve_with_a_two_word_query(roslaun
     roslaunch("ros_mongo", "ros_mongo_server.launch", db_url=couchdb_url, session_id="compat",
               spool_path=str(tmp_path / "spool"))
     publisher = rospy.Publisher("/scan", LaserScan, queue_size=10)
-    wait_until(lambda: publisher.get_num_connections() > 0, 20, what="recorder subscribed")
+    wait_until(lambda: publisher.get_num_connections() > 0, 60, what="recorder subscribed")
     sent = scan()
     for _ in range(5):
         publisher.publish(sent)
-    wait_until(lambda: diagnostics.count("stored") == 5, 20, what="5 scans stored")
+    wait_until(lambda: diagnostics.count("stored") == 5, 60, what="5 scans stored")
     collector = Collector(["/scan_mongo"])
     roslaunch("ros_mongo", "ros_mongo_retrieve.launch", db_url=couchdb_url, query="tags lidar")
-    wait_until(lambda: len(collector.got["/scan_mongo"]) == 5, 30, what="5 scans replayed")
+    wait_until(lambda: len(collector.got["/scan_mongo"]) == 5, 90, what="5 scans replayed")
     replayed = LaserScan().deserialize(collector.got["/scan_mongo"][0][1])
     assert replayed.ranges[:3] == pytest.approx(sent.ranges[:3]) and replayed.header.frame_id == "laser"
     publisher.unregister()

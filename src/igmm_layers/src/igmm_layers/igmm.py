@@ -19,11 +19,20 @@ below round-off), and ages are kept as birth counters, so most updates touch one
 
 Beyond the original: sample weights (detection confidences) multiply the posterior;
 `measurement_cov` (e.g. an object's extent) enters as C <- (1-omega)(C + omega e e^T) + omega R
-and widens new components; `batch=True` makes each `partial_fit` call independent of the order of
-its rows (they are processed in a canonical pseudo-random order); every component keeps the times
-of the observations it was the most likely source of (first/last seen, counts in a time window).
+and widens new components; every component keeps the times of the observations it was the most
+likely source of (first/last seen, counts in a time window).
+
+Batch mode (`batch=True`): the model is a function of the *multiset* of rows given since the last
+`fit`, restore or `consolidate()`: the rows are kept, and every `partial_fit` call relearns all of
+them, starting from the state at that point, in one canonical pseudo-random order (sorted by a hash
+of each row's values). So the same data fed in any row order and split into any chunks over any
+number of calls gives a bit-identical model (same components, same numbers). The price: each call
+costs O(rows kept) and the rows are held in memory until `consolidate()`, which makes the current
+model the new starting point (later calls are then order-independent among themselves only).
+Rows without `times` get the sample count at that starting point, whatever the chunking.
 """
 import bisect
+import copy
 import math
 from collections import deque
 from typing import Dict, List
@@ -40,6 +49,9 @@ _LOG_2PI = math.log(2.0 * math.pi)
 _min = np.minimum.reduce
 _ARRAYS = ("means_", "covariances_", "precisions_", "log_dets_", "support_", "born_", "ids_",
            "first_seen_", "last_seen_", "_log_score")
+# the learnt state a batch-mode call starts again from (with _ARRAYS)
+_STATE = ("observation_times_", "n_updates_", "n_samples_seen_", "_next_id", "_since_refresh",
+          "_prune_queue", "n_features_in_", "sigma_ini_", "_threshold")
 
 
 class IncrementalGMM:
@@ -54,7 +66,8 @@ class IncrementalGMM:
             every component exceeds -2 ln tau_nov.
         v_min, sp_min: pruning: a component older than v_min updates with less than sp_min
             support is removed. Components with support < sp_min are "tentative" (`confirmed_`).
-        batch: each partial_fit call is one batch whose result does not depend on row order.
+        batch: the model depends only on the multiset of rows given since the last fit/restore/
+            consolidate(), not on their order or on how they were split into calls (see above).
         refresh_interval: updates between exact recomputations of precisions and log-determinants.
         max_times: observation times kept per component (the oldest are dropped beyond it).
     """
@@ -83,6 +96,8 @@ class IncrementalGMM:
             if name not in self.get_params():
                 raise InvalidInputError(f"unknown parameter {name!r} of IncrementalGMM")
             setattr(self, name, value)
+        if not self.batch:
+            self.consolidate()
         if self.is_fitted:
             self._check_params()
             self.sigma_ini_ = self._initial_sigma(self.n_features_in_)
@@ -131,35 +146,74 @@ class IncrementalGMM:
         self._next_id = 0
         self._since_refresh = 0
         self._prune_queue: deque = deque()
+        self.consolidate()
 
     def fit(self, X, sample_weight=None, *, measurement_cov=None, times=None) -> "IncrementalGMM":
         """Forget everything, then learn X (one partial_fit call)."""
         for name in _ARRAYS + ("n_features_in_",):
             self.__dict__.pop(name, None)
+        self.consolidate()
         return self.partial_fit(X, sample_weight, measurement_cov=measurement_cov, times=times)
 
     def partial_fit(self, X, sample_weight=None, *, measurement_cov=None, times=None) -> "IncrementalGMM":
-        """Learn the rows of X (n, D) in order (or canonically ordered when `batch`).
+        """Learn the rows of X (n, D) in order (in batch mode: relearn all kept rows, see above).
 
         Args:
             sample_weight: (n,) positive weights (detection confidences); default 1.
             measurement_cov: (n, D, D) or (n, D) (variances) measurement covariances; default none.
             times: (n,) observation times (s); default the running sample count (in batch mode
-                the count before the batch, for every row).
+                the count at the starting point, for every row).
         """
         dim = self.n_features_in_ if self.is_fitted else None
+        t0 = self.n_samples_seen_ if dim else 0
+        if self.batch and self._batch_start is not None:
+            t0 = self._batch_start["n_samples_seen_"]
         X, weights, covs, times = validate_samples(X, sample_weight, measurement_cov, times, dim,
-                                                   self.n_samples_seen_ if dim else 0, self.batch)
+                                                   t0, self.batch)
         if not self.is_fitted:
             self._reset(X.shape[1])
+        if self.batch:
+            self._learn_batch(X, weights, covs, times)
+            return self
+        self.consolidate()
         terms = rank_one_terms(covs) if covs is not None else None
-        order = range(len(X))
-        if self.batch and len(X) > 1:
-            order = canonical_order(X, weights, times, covs)
-        for i in order:
+        for i in range(len(X)):
             self._learn_one(X[i], float(weights[i]), terms[i] if terms else (), float(times[i]))
         self.n_samples_seen_ += len(X)
         return self
+
+    # batch mode: the kept rows and the state they are relearnt from
+    _batch_start = None
+    _batch_rows: List[tuple] = []
+
+    def consolidate(self) -> "IncrementalGMM":
+        """Batch mode: make the current model the starting point of later calls and drop the
+        kept rows (bounds memory and the cost per call; order independence then holds among the
+        later calls only). Harmless in sequential mode."""
+        self._batch_start = None
+        self._batch_rows = []
+        return self
+
+    @property
+    def n_batch_rows_(self) -> int:
+        """Rows kept for relearning in batch mode (0 in sequential mode)."""
+        return sum(len(rows[0]) for rows in self._batch_rows)
+
+    def _learn_batch(self, X, weights, covs, times) -> None:
+        dim = X.shape[1]
+        if covs is None:  # zero covariance: no rank-one terms, the same update as none
+            covs = np.zeros((len(X), dim, dim))
+        if self._batch_start is None:
+            self._batch_start = copy.deepcopy({name: getattr(self, name) for name in _ARRAYS + _STATE})
+        rows = self._batch_rows + [(X, weights, covs, times)]
+        for name, value in copy.deepcopy(self._batch_start).items():
+            setattr(self, name, value)
+        X, weights, covs, times = (np.concatenate(column) for column in zip(*rows))
+        terms = rank_one_terms(covs)
+        for i in canonical_order(X, weights, times, covs):
+            self._learn_one(X[i], float(weights[i]), terms[i], float(times[i]))
+        self.n_samples_seen_ += len(X)
+        self._batch_rows = rows
 
     def _learn_one(self, x: np.ndarray, weight: float, terms, time: float) -> None:
         if len(self.support_) == 0:

@@ -2,11 +2,12 @@
 
 - `most_likely` / `closest`: simple lookup of one cluster;
 - `pair_likelihood`: how likely class A is found near class B, by one of two methods:
-  "distance_weighted" (the original): the mean over cluster pairs (a_i, b_j) in the same region
-  whose means are at most `max_distance` apart of p(mu_a | b) = N(mu_a; mu_b, C_b), weighted by
-  exp(-d / 1 m). Asymmetric, ignores A's spread and the clusters' weights.
-  "overlap" (default): sum over the same pairs of w_a w_b N(mu_a; mu_b, C_a + C_b), the integral
-  of p_A(x) p_B(x) over the map (restricted to pairs in range): the density of finding an A and
+  "distance_weighted" (default; the original's and the report's definition): the mean over
+  cluster pairs (a_i, b_j) in the same region whose means are at most `max_distance` apart of
+  p(mu_a | b) = N(mu_a; mu_b, C_b), weighted by exp(-d / 1 m). Asymmetric, ignores A's spread
+  and the clusters' weights.
+  "overlap" (a named option): sum over the same pairs of w_a w_b N(mu_a; mu_b, C_a + C_b), the
+  integral of p_A(x) p_B(x) over the map (restricted to pairs in range): the density of finding an A and
   a B at the same place. Symmetric, uses both spreads and the mixture weights.
   Both are densities (1/m^2 in 2-D), comparable across classes B for a fixed A.
 - `alternate_classes`: the other classes ranked by pair likelihood with a class;
@@ -23,8 +24,8 @@ from igmm_layers.layers import ClusterTable
 __all__ = ["PAIR_METHODS", "DEFAULT_PAIR_METHOD", "DEFAULT_MAX_DISTANCE", "most_likely", "closest",
            "pair_likelihood", "alternate_classes", "count_observed"]
 
-PAIR_METHODS = ("overlap", "distance_weighted")
-DEFAULT_PAIR_METHOD = "overlap"
+PAIR_METHODS = ("distance_weighted", "overlap")
+DEFAULT_PAIR_METHOD = "distance_weighted"
 DEFAULT_MAX_DISTANCE = 5.0
 _DISTANCE_SCALE = 1.0  # m, of the original's exp(-d) weighting
 

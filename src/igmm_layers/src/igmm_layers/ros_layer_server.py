@@ -46,7 +46,7 @@ class LayerServer:
       ~class_hierarchy (dict): groups: furniture, appliance, fixture (see the YAML).
       ~class_colours (dict): [r, g, b] in [0, 1] per class of the generated building (others: a
           hue from the name).
-      ~marker_rate (double, 2.0 Hz; 0: no markers), ~pair_method (str, "overlap"),
+      ~marker_rate (double, 2.0 Hz; 0: no markers), ~pair_method (str, "distance_weighted"),
       ~pair_max_distance (double, 5.0 m), ~db_url (str, ""), ~tf_timeout (double, 0.2 s),
       ~queue_size (int, 10000): observations waiting to be learnt (more are dropped and counted).
     Topics:

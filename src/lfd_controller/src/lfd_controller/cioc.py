@@ -103,13 +103,21 @@ class LinearCIOC:
             demonstrations are exactly optimal, where L grows without bound with the scale).
         outer_iterations, max_iter: augmented-Lagrangian rounds and L-BFGS iterations per round.
         random_state: seeds the initial weights' small jitter.
+        signs: {feature name: -1 or +1}: weights constrained to that sign (a prior on what the
+            features mean, e.g. being far from the goal is never rewarded); default none.
     Fitted attributes: weights_, reward_, beta_ (final regulariser; 0 = none needed),
     log_likelihood_ (per demonstration), n_iter_, fit_time_.
     """
 
     def __init__(self, features: Optional[FeatureSet] = None, *, weight_prior: float = 1e-3,
-                 outer_iterations: int = 6, max_iter: int = 300, random_state=None):
+                 outer_iterations: int = 6, max_iter: int = 300, random_state=None,
+                 signs: Optional[dict] = None):
         self.features = features or FeatureSet()
+        self.signs = dict(signs or {})
+        unknown = sorted(set(self.signs) - set(self.features.names))
+        if unknown or any(v not in (-1, 1) for v in self.signs.values()):
+            raise LearningError(f"weight signs must map feature names {list(self.features.names)} to "
+                                f"-1 or +1, got {signs!r}")
         self.weight_prior = weight_prior
         self.outer_iterations = outer_iterations
         self.max_iter = max_iter
@@ -136,8 +144,8 @@ class LinearCIOC:
     def initial_weights(self) -> np.ndarray:
         rng = np.random.default_rng(self.random_state)
         ks = len(self.features.state_names)
-        weights = np.concatenate([0.01 * rng.standard_normal(ks), -np.ones(len(self.features.control_names))])
-        return weights
+        control = [-1.0 if name.endswith("_effort") else 0.0 for name in self.features.control_names]
+        return np.concatenate([0.01 * rng.standard_normal(ks), control])
 
     def fit(self, demos: Sequence[Demonstration]) -> "LinearCIOC":
         started = time.monotonic()
@@ -151,7 +159,11 @@ class LinearCIOC:
 
         solver = AugmentedLagrangian(lambda w, b: self.log_likelihood(terms, w, b),
                                      outer=self.outer_iterations, max_iter=self.max_iter)
-        weights, beta, iterations = solver.run(weights0, 0.0, prior)
+        bounds = [{-1: (None, 0.0), 1: (0.0, None)}.get(self.signs.get(name), (None, None))
+                  for name in self.features.names]
+        weights0 = np.array([np.clip(w, lo if lo is not None else -np.inf, hi if hi is not None else np.inf)
+                             for w, (lo, hi) in zip(weights0, bounds)])
+        weights, beta, iterations = solver.run(weights0, 0.0, prior, bounds=bounds)
         final = self.log_likelihood(terms, weights, beta, derivatives=False)
         if final is None or not np.all(np.isfinite(weights)):
             raise LearningError("inverse optimal control diverged")

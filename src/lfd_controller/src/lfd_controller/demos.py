@@ -98,6 +98,22 @@ def trim_to_goal(demo: Demonstration, extra_steps: int = 0) -> Demonstration:
                          None if demo.states is None else demo.states[:end], demo.source, demo.meta)
 
 
+def smooth_commands(demo: Demonstration, window: int = 5) -> Demonstration:
+    """The demonstration with its commands averaged over `window` steps (a centred moving average;
+    1: unchanged): what a person meant with a quantised, noisy stick rather than the stick's jitter.
+    The recorded states are dropped (they belong to the raw commands); learning rolls out the
+    smoothed commands through the model."""
+    if window < 1:
+        raise DemonstrationError(f"smoothing window must be >= 1 step, got {window!r}")
+    if window == 1:
+        return demo
+    kernel = np.ones(window) / window
+    padded = np.pad(demo.actions, ((window // 2, window - 1 - window // 2), (0, 0)), mode="edge")
+    actions = np.column_stack([np.convolve(padded[:, i], kernel, mode="valid") for i in (0, 1)])
+    return Demonstration(demo.scenario, demo.start, actions, demo.t0, None, demo.source,
+                         dict(demo.meta, smoothed=window))
+
+
 def demos_summary(demos: List[Demonstration]) -> str:
     lengths = [d.length for d in demos]
     return (f"{len(demos)} demonstrations, {sum(lengths)} steps "

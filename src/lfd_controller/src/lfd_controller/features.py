@@ -17,6 +17,16 @@ from lfd_controller.jets import Jet
 STATE_FEATURES = ("goal_distance", "goal_heading", "obstacle_proximity", "obstacle_ahead")
 CONTROL_FEATURES = ("speed_effort", "turn_effort")
 FEATURE_NAMES = STATE_FEATURES + CONTROL_FEATURES
+# Optional linear control feature: the commanded forward speed. With speed_effort it gives the
+# reward a preferred cruising speed (w_fwd / 2 w_effort): how people drive with a joystick, who
+# hold the stick at a comfortable position rather than trading effort against summed distance.
+FORWARD_FEATURE = "forward_command"
+# Optional state feature: heading toward a near obstacle (people turn away from what they face,
+# well before they get close), fading with distance over ahead_scale.
+FACING_FEATURE = "obstacle_facing"
+# Optional state feature: squared speed near the goal (people brake as they arrive and stop
+# there), v^2 exp(-|goal - p|^2 / (2 goal_slow_scale^2)).
+SLOWING_FEATURE = "goal_slowing"
 
 
 @dataclass
@@ -64,6 +74,12 @@ class FeatureSet:
         heading_softening: softening length of the goal heading's normalisation (m).
         proximity_scale: Gaussian fall-off length of the obstacle proximity (m).
         ahead_scale: fall-off length of the "obstacle between me and the goal" feature (m).
+        forward_command: add the linear control feature "forward_command" (v_cmd) after the
+            effort features (default off: the original six features).
+        obstacle_facing: add the state feature "obstacle_facing" after the four state features
+            (default off).
+        goal_slowing: add the state feature "goal_slowing" (after those), whose fall-off length
+            is goal_slow_scale (m) (default off).
     """
 
     names: Sequence[str] = FEATURE_NAMES
@@ -71,7 +87,9 @@ class FeatureSet:
     control_names: Sequence[str] = CONTROL_FEATURES
 
     def __init__(self, *, goal_softening: float = 0.2, heading_softening: float = 0.3,
-                 proximity_scale: float = 0.35, ahead_scale: float = 0.8):
+                 proximity_scale: float = 0.35, ahead_scale: float = 0.8,
+                 forward_command: bool = False, obstacle_facing: bool = False,
+                 goal_slowing: bool = False, goal_slow_scale: float = 0.5):
         for name, value in (("goal_softening", goal_softening), ("heading_softening", heading_softening),
                             ("proximity_scale", proximity_scale), ("ahead_scale", ahead_scale)):
             if not value > 0:
@@ -80,13 +98,31 @@ class FeatureSet:
         self.heading_softening = heading_softening
         self.proximity_scale = proximity_scale
         self.ahead_scale = ahead_scale
+        self.forward_command = bool(forward_command)
+        self.obstacle_facing = bool(obstacle_facing)
+        self.goal_slowing = bool(goal_slowing)
+        if not goal_slow_scale > 0:
+            raise LfdError(f"feature parameter goal_slow_scale must be positive, got {goal_slow_scale!r}")
+        self.goal_slow_scale = float(goal_slow_scale)
+        self.state_names = STATE_FEATURES + ((FACING_FEATURE,) if self.obstacle_facing else ()) + (
+            (SLOWING_FEATURE,) if self.goal_slowing else ())
+        self.control_names = CONTROL_FEATURES + ((FORWARD_FEATURE,) if self.forward_command else ())
+        self.names = self.state_names + self.control_names
 
     def get_params(self) -> dict:
-        return {"goal_softening": self.goal_softening, "heading_softening": self.heading_softening,
-                "proximity_scale": self.proximity_scale, "ahead_scale": self.ahead_scale}
+        params = {"goal_softening": self.goal_softening, "heading_softening": self.heading_softening,
+                  "proximity_scale": self.proximity_scale, "ahead_scale": self.ahead_scale}
+        if self.forward_command:
+            params["forward_command"] = True
+        if self.obstacle_facing:
+            params["obstacle_facing"] = True
+        if self.goal_slowing:
+            params.update(goal_slowing=True, goal_slow_scale=self.goal_slow_scale)
+        return params
 
     def _state_jets(self, states: np.ndarray, goal: np.ndarray, obstacles: np.ndarray) -> List[Jet]:
-        px, py, yaw = Jet.variables(states[:, :3])
+        variables = Jet.variables(states[:, :self._state_vars])
+        px, py, yaw = variables[:3]
         gx, gy = goal[0] - px, goal[1] - py            # radial vector to the goal
         ox, oy = obstacles[:, 0] - px, obstacles[:, 1] - py   # radial vector to the obstacle
         goal_sq = gx.square() + gy.square()
@@ -97,7 +133,19 @@ class FeatureSet:
         proximity = (obst_sq * (-0.5 / self.proximity_scale ** 2)).exp()
         cos_between = (gx * ox + gy * oy) / ((goal_sq + 0.01) * (obst_sq + 0.01)).sqrt()
         ahead = (obst_sq * (-0.5 / self.ahead_scale ** 2)).exp() * (cos_between + 1.0) * 0.5
-        return [goal_distance, heading, proximity, ahead]
+        jets = [goal_distance, heading, proximity, ahead]
+        if self.obstacle_facing:
+            facing = (ox * yaw.cos() + oy * yaw.sin()) / (obst_sq + self.heading_softening ** 2).sqrt()
+            jets.append((obst_sq * (-0.5 / self.ahead_scale ** 2)).exp() * (facing + 1.0) * 0.5)
+        if self.goal_slowing:
+            near_goal = (goal_sq * (-0.5 / self.goal_slow_scale ** 2)).exp()
+            jets.append(variables[3].square() * near_goal)
+        return jets
+
+    @property
+    def _state_vars(self) -> int:
+        """How many leading state entries the state features depend on (px, py, yaw[, v])."""
+        return 4 if self.goal_slowing else 3
 
     def evaluate(self, states, actions, times, task: Task, *, order: int = 2) -> FeatureValues:
         """Features of states (T, 5) and actions (T, 2) at episode times (T,)."""
@@ -112,14 +160,20 @@ class FeatureSet:
                                 np.asarray(task.obstacle_position(times), float).reshape(count, 2))
         ks = len(jets)
         state_jac = np.zeros((count, ks, 5))
-        state_jac[:, :, :3] = np.stack([jet.grad for jet in jets], axis=1)
+        nv = self._state_vars
+        state_jac[:, :, :nv] = np.stack([jet.grad for jet in jets], axis=1)
         state_hess = None
         if order >= 2:
             state_hess = np.zeros((count, ks, 5, 5))
-            state_hess[:, :, :3, :3] = np.stack([jet.hess for jet in jets], axis=1)
-        control_jac = np.zeros((count, 2, 2))
+            state_hess[:, :, :nv, :nv] = np.stack([jet.hess for jet in jets], axis=1)
+        kc = len(self.control_names)
+        control_jac = np.zeros((count, kc, 2))
         control_jac[:, 0, 0], control_jac[:, 1, 1] = 2.0 * actions[:, 0], 2.0 * actions[:, 1]
-        control_hess = np.zeros((count, 2, 2, 2))
+        control_hess = np.zeros((count, kc, 2, 2))
         control_hess[:, 0, 0, 0] = control_hess[:, 1, 1, 1] = 2.0
+        control = actions ** 2
+        if self.forward_command:
+            control_jac[:, 2, 0] = 1.0
+            control = np.column_stack([control, actions[:, 0]])
         return FeatureValues(np.stack([jet.val for jet in jets], axis=1), state_jac, state_hess,
-                             actions ** 2, control_jac, control_hess)
+                             control, control_jac, control_hess)

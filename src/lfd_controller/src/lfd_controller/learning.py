@@ -17,6 +17,7 @@ from lfd_controller import plots as plotting
 from lfd_controller.cioc import LinearCIOC
 from lfd_controller.demos import Demonstration, demos_summary, trim_to_goal
 from lfd_controller.errors import LfdError, RewardFileError
+from lfd_controller.features import FeatureSet
 from lfd_controller.gp_cioc import GPCIOC
 from lfd_controller.rewards import reward_from_dict
 
@@ -24,11 +25,27 @@ from lfd_controller.rewards import reward_from_dict
 RewardStore = Callable[[object, Dict], str]
 
 
-def fit_reward(demos: Sequence[Demonstration], kind: str = "linear", seed: int = 0):
-    """(reward, learner) from demonstrations with the linear or GP CIOC."""
+def person_features() -> FeatureSet:
+    """The feature set for demonstrations people give with a joystick: the original features
+    plus a preferred cruising speed (forward_command) and braking as one arrives (goal_slowing).
+    See README "Learning from people" for why."""
+    return FeatureSet(forward_command=True, goal_slowing=True)
+
+
+# What the person features mean: far from the goal or near the obstacle is never better, nor is
+# effort.
+PERSON_SIGNS = {"goal_distance": -1, "obstacle_proximity": -1, "obstacle_ahead": -1,
+                "goal_slowing": -1, "speed_effort": -1, "turn_effort": -1}
+
+
+def fit_reward(demos: Sequence[Demonstration], kind: str = "linear", seed: int = 0,
+               features: Optional[FeatureSet] = None, signs: Optional[dict] = None):
+    """(reward, learner) from demonstrations with the linear or GP CIOC (features: default
+    FeatureSet())."""
     if kind not in ("linear", "gp"):
         raise LfdError(f"reward kind must be 'linear' or 'gp', got {kind!r}")
-    learner = LinearCIOC(random_state=seed) if kind == "linear" else GPCIOC(random_state=seed)
+    learner = (LinearCIOC(features, random_state=seed, signs=signs) if kind == "linear"
+               else GPCIOC(features, random_state=seed))
     with threadpool_limits(1):      # small matrices: BLAS threads only contend (10x slower under load)
         learner.fit(list(demos))
     return learner.reward_, learner

@@ -78,12 +78,17 @@ class RewardControllerConfig(NodeConfig):
     a_max: float = param(UnicycleLimits.a_max, "robot acceleration limit (m/s^2)")
     alpha_max: float = param(UnicycleLimits.alpha_max, "robot angular acceleration limit (rad/s^2)")
     obstacle_radius: float = param(0.25, "radius of the obstacle seen on 'obstacle' (m)")
+    robot_radius: float = param(0.18, "robot radius (m; the scenario's when one is received)")
+    collision_margin: float = param(0.0, "> 0: add a fixed collision barrier this far (m) beyond "
+                                         "touching the obstacle to the learned reward; 0: none")
     frame: str = param("odom", "frame of the published plan")
     enabled: bool = param(True, "drive from the start (service ~enable switches)")
 
     def check(self) -> None:
         if not self.rate > 0:
             raise ConfigError(f"~rate must be positive, got {self.rate!r}")
+        if self.collision_margin < 0:
+            raise ConfigError(f"~collision_margin must be >= 0, got {self.collision_margin!r}")
 
     def limits(self) -> UnicycleLimits:
         """The robot's limits (ModelError when one is not positive)."""

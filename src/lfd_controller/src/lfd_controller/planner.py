@@ -87,6 +87,45 @@ def plan_from_seeds(reward, model, task: Task, start, t0: float, count: int, *, 
     return best
 
 
+class CollisionBarrier:
+    """A reward plus a fixed (not learned) penalty for coming closer than clearance + margin to the
+    obstacle's centre: -scale * ((clearance + margin - d) / margin)^2 inside, 0 outside (C1).
+
+    Demonstrations never show what touching the obstacle costs (people keep clear of it), so a
+    reward learned from them can rank a graze above a detour; the barrier encodes the physical
+    fact, robot radius + obstacle radius, that the demonstrations cannot. `scale` defaults to 10 x
+    the largest learned weight magnitude (the reward's own units). First-order only (planning)."""
+
+    kind = "barrier"
+
+    def __init__(self, reward, clearance: float, *, margin: float = 0.1, scale: Optional[float] = None):
+        if not clearance > 0 or not margin > 0:
+            raise LfdError(f"barrier clearance and margin must be positive, got {clearance!r}, {margin!r}")
+        self.reward, self.clearance, self.margin = reward, float(clearance), float(margin)
+        if scale is None:
+            weights = getattr(reward, "weights", None)
+            if weights is None:
+                weights = np.concatenate([reward.mean_weights, reward.control_weights])
+            scale = 10.0 * float(np.max(np.abs(weights)))
+        self.scale = float(scale)
+
+    def derivatives(self, states, actions, times, task: Task, *, order: int = 2):
+        if order > 1:
+            raise LfdError("CollisionBarrier gives first derivatives only (for planning)")
+        rd = self.reward.derivatives(states, actions, times, task, order=order)
+        states = np.atleast_2d(np.asarray(states, float))
+        offset = states[:, :2] - np.asarray(task.obstacle_position(np.asarray(times, float)),
+                                            float).reshape(-1, 2)
+        distance = np.maximum(np.linalg.norm(offset, axis=1), 1e-9)
+        depth = np.maximum(self.clearance + self.margin - distance, 0.0) / self.margin
+        rd.value = rd.value - self.scale * depth ** 2
+        if order >= 1:
+            rx = rd.rx.copy()
+            rx[:, :2] += (2.0 * self.scale * depth / self.margin / distance)[:, None] * offset
+            rd.rx = rx
+        return rd
+
+
 class RecedingHorizonController:
     """Re-plans `horizon` steps of the reward from the current state at every call (warm-started
     from the previous plan, shifted by the time that passed, plus turning seeds) and returns the
@@ -100,12 +139,14 @@ class RecedingHorizonController:
         stopping in front of an obstacle); max_iter: L-BFGS iterations for the warm start;
         seed_iter: iterations for each alternative seed (0 = no seeds after the first plan), tried
         every `seed_every` calls (turning seeds find ways around an obstacle that the warm start,
-        a local optimum, misses).
+        a local optimum, misses); budget: seconds one call may take (None: no limit) - the
+        seeds are skipped once the warm start has used half of it, and calls that still exceed
+        it are counted in `overruns_` (cycle_times_ keeps every call's duration).
     """
 
     def __init__(self, reward, model, *, horizon: int = 20, plan_dt: Optional[float] = 0.2,
                  terminal: float = 10.0, max_iter: int = 15, seed_iter: int = 6, seed_every: int = 5,
-                 seed_turns: Sequence[float] = (0.0, 1.2, -1.2)):
+                 seed_turns: Sequence[float] = (0.0, 1.2, -1.2), budget: Optional[float] = None):
         if horizon < 2:
             raise LfdError(f"the planning horizon must be at least 2 steps, got {horizon}")
         if plan_dt is not None and not plan_dt > 0:
@@ -115,12 +156,16 @@ class RecedingHorizonController:
         self.max_iter, self.seed_iter, self.seed_turns = max_iter, seed_iter, seed_turns
         self.seed_every = max(1, int(seed_every))
         self.terminal = float(terminal)
+        if budget is not None and not budget > 0:
+            raise LfdError(f"the cycle budget must be positive seconds, got {budget!r}")
+        self.budget = budget
         self.reset()
 
     def reset(self) -> None:
         self.plan_: Optional[np.ndarray] = None
         self._plan_time: Optional[float] = None
         self.cycle_times_: list = []
+        self.overruns_ = 0
 
     def _warm_start(self, t: float) -> Optional[np.ndarray]:
         if self.plan_ is None or self._plan_time is None:
@@ -143,13 +188,19 @@ class RecedingHorizonController:
             seeds_iter = self.seed_iter if len(self.cycle_times_) % self.seed_every == 0 else 0
         else:
             seeds_iter = self.max_iter
+        if self.budget is not None and warm is not None and \
+                time.perf_counter() - started > 0.5 * self.budget:
+            seeds_iter = 0
         if seeds_iter > 0:
             for seed in seeds:
                 candidates.append(optimise_commands(self.reward, self.model, task, state, t, seed,
                                                     max_iter=seeds_iter, terminal=self.terminal))
         plan, _ = max(candidates, key=lambda item: item[1])
         self.plan_, self._plan_time = plan, t
-        self.cycle_times_.append(time.perf_counter() - started)
+        elapsed = time.perf_counter() - started
+        self.cycle_times_.append(elapsed)
+        if self.budget is not None and elapsed > self.budget:
+            self.overruns_ += 1
         return plan[0].copy()
 
     def planned_states(self, state) -> np.ndarray:

@@ -14,7 +14,7 @@ from threadpoolctl import threadpool_limits
 from lfd_controller.features import Task
 from lfd_controller.learning import load_reward
 from lfd_controller.params import RewardControllerConfig
-from lfd_controller.planner import RecedingHorizonController
+from lfd_controller.planner import CollisionBarrier, RecedingHorizonController
 from robot_common.errors import ModelError, TaskError
 from robot_common.maps import yaw_to_quaternion
 from robot_common.ros_node import odom_state, read_config
@@ -30,13 +30,18 @@ class RewardControllerNode:
       ~rate (double, 10), ~horizon (int, 20), ~plan_dt (double, 0.2), ~terminal (double, 10),
       ~max_iter (int, 15), ~goal_tolerance (double, 0.25): stop (zero command) inside it,
       ~v_max, ~w_max, ~a_max, ~alpha_max: the robot's limits (the scenario's when one is received),
-      ~obstacle_radius (double, 0.25), ~frame (str, "odom"), ~enabled (bool, true).
+      ~obstacle_radius (double, 0.25), ~robot_radius (double, 0.18), ~collision_margin (double,
+      0: > 0 adds planner.CollisionBarrier at robot + obstacle radius + margin to the reward),
+      ~frame (str, "odom"), ~enabled (bool, true).
     Topics in: odom (nav_msgs/Odometry), goal (geometry_msgs/PoseStamped), obstacle
       (nav_msgs/Odometry: position and velocity; predicted at constant velocity), scenario
       (std_msgs/String; optional: time-indexed obstacle and limits from the simulator's scenario),
       sim_time (sensor_msgs/TimeReference; optional: episode time for the scenario's obstacle).
+      Without sim_time the episode time is wall-clock (monotonic) seconds since driving was
+      enabled, so the warm start shifts with real time.
     Topics out: cmd_vel (geometry_msgs/Twist), ~plan (nav_msgs/Path, while someone listens),
-      ~cycle_time (std_msgs/Float64: seconds spent planning each cycle).
+      ~cycle_time (std_msgs/Float64: seconds spent planning each cycle; the budget is 1/rate:
+      alternative seeds are skipped when the warm start used half of it, overruns are warned).
     Services: ~enable (std_srvs/SetBool): start or stop driving (stopping publishes a zero command).
     """
 
@@ -48,9 +53,19 @@ class RewardControllerNode:
         self.obstacle_radius = config.obstacle_radius
         self.enabled = config.enabled
         self.options = config.controller_options()
-        self.controller = RecedingHorizonController(reward, Unicycle(0.1, config.limits()), **self.options)
+        self.options["budget"] = 1.0 / config.rate
+        clearance = config.robot_radius + config.obstacle_radius
+        self.controller = RecedingHorizonController(self.planned_reward(clearance),
+                                                    Unicycle(0.1, config.limits()), **self.options)
+        self.clock_origin = time.monotonic()     # wall-clock episode time without sim_time
         self.state = self.goal = self.obstacle = self.scenario = self.episode_time = None
         self.cmd = self.plan = self.cycle = self.timer = None
+
+    def planned_reward(self, clearance: float):
+        """The learned reward, plus the collision barrier when ~collision_margin > 0."""
+        if self.config.collision_margin > 0:
+            return CollisionBarrier(self.reward, clearance, margin=self.config.collision_margin)
+        return self.reward
 
     def setup(self) -> "RewardControllerNode":
         """Publishers, subscribers, the ~enable service and the control timer."""
@@ -88,7 +103,8 @@ class RewardControllerNode:
             return
         with self.lock:
             self.scenario = scenario
-            self.controller = RecedingHorizonController(self.reward, scenario.model(), **self.options)
+            self.controller = RecedingHorizonController(self.planned_reward(scenario.clearance),
+                                                        scenario.model(), **self.options)
 
     def on_time(self, msg):
         with self.lock:
@@ -98,6 +114,7 @@ class RewardControllerNode:
         with self.lock:
             self.enabled = bool(request.data)
             self.controller.reset()
+            self.clock_origin = time.monotonic()
         if not request.data:
             self.cmd.publish(Twist())
         return SetBoolResponse(True, "driving" if request.data else "stopped")
@@ -110,11 +127,12 @@ class RewardControllerNode:
             t = self.episode_time[0]      # the episode time of the latest step (odom comes with it)
             goal = self.goal if self.goal is not None else self.scenario.goal
             return Task(goal, self.scenario.obstacle.position, self.scenario.obstacle.radius), t
+        t = now - self.clock_origin
         if self.goal is None or self.obstacle is None:
-            return None, 0.0
+            return None, t
         position, velocity, seen = self.obstacle
-        return Task.constant_velocity(self.goal, position + velocity * (now - seen), velocity, 0.0,
-                                      self.obstacle_radius), 0.0
+        return Task.constant_velocity(self.goal, position + velocity * (now - seen), velocity, t,
+                                      self.obstacle_radius), t
 
     def tick(self, _event):
         with self.lock:
@@ -129,7 +147,12 @@ class RewardControllerNode:
         if np.linalg.norm(state[:2] - task.goal) > self.tolerance:
             started = time.perf_counter()
             twist.linear.x, twist.angular.z = self.controller.act(state, t, task)
-            self.cycle.publish(Float64(time.perf_counter() - started))
+            spent = time.perf_counter() - started
+            self.cycle.publish(Float64(spent))
+            if spent > self.controller.budget:
+                rospy.logwarn_throttle(10.0, f"reward_controller: a cycle took {spent * 1000:.0f} ms, "
+                                             f"over the {self.controller.budget * 1000:.0f} ms budget "
+                                             f"({self.controller.overruns_} overruns so far)")
         self.cmd.publish(twist)
         if self.plan.get_num_connections() > 0:
             self.publish_plan(state)

@@ -19,6 +19,7 @@ from typing import Dict, Optional, Union
 from region_search.embeddings import WordEmbeddings
 from region_search.errors import ModelError
 from region_search.node_config import BACKENDS, BackendConfig
+from region_search.progress import LoadProgress
 from region_search.sentence import SentenceEmbeddings, load_sentence_model
 from region_search.training import load_embeddings
 
@@ -39,15 +40,19 @@ class LoadedBackend:
     info: Dict = field(default_factory=dict)
 
 
-def load_backend(config: Optional[BackendConfig] = None, *, progress: bool = False) -> LoadedBackend:
+def load_backend(config: Optional[BackendConfig] = None, *, progress: bool = False,
+                 monitor: Optional[LoadProgress] = None) -> LoadedBackend:
     """The model to serve (default: BackendConfig()); ModelError when it (and its allowed
-    fallback) cannot be loaded."""
+    fallback) cannot be loaded. `progress`: tqdm bars; `monitor`: follows the loading stages
+    and the word2vec training epochs (the caller marks it finished)."""
     config = config if config is not None else BackendConfig()
     if config.backend not in BACKENDS:
         raise ModelError(f"unknown embedding backend {config.backend!r}; use one of {BACKENDS}")
     start = time.monotonic()
     note = ""
     if config.backend == "sentence":
+        if monitor is not None:
+            monitor.set_stage("loading the sentence model")
         try:
             embeddings = load_sentence_model(config.model_path, threads=config.threads,
                                              cache_size=config.cache_size,
@@ -59,7 +64,7 @@ def load_backend(config: Optional[BackendConfig] = None, *, progress: bool = Fal
             note = f"fallback to word2vec: sentence model unavailable: {err}"
             LOG.warning("%s; loading word2vec (source %r)", note, _word2vec_source(config, False))
     embeddings, info = _load_word2vec(config, use_model_path=config.backend == "word2vec",
-                                      progress=progress)
+                                      progress=progress, monitor=monitor)
     return LoadedBackend(embeddings, "word2vec", note, time.monotonic() - start, info)
 
 
@@ -67,11 +72,13 @@ def _word2vec_source(config: BackendConfig, use_model_path: bool) -> str:
     return "pretrained" if use_model_path and config.model_path else config.source
 
 
-def _load_word2vec(config: BackendConfig, *, use_model_path: bool, progress: bool):
+def _load_word2vec(config: BackendConfig, *, use_model_path: bool, progress: bool,
+                   monitor: Optional[LoadProgress] = None):
     source = _word2vec_source(config, use_model_path)
     path = config.model_path if use_model_path and config.model_path else config.pretrained_path
     cache_dir: Optional[str] = config.cache_dir or None
     return load_embeddings(source, pretrained_path=path, brown_path=config.brown_path,
                            wordnet_dir=config.wordnet_dir, params=config.word2vec,
                            cache_dir=cache_dir, progress=progress, limit=config.limit or None,
-                           options={"remove_components": config.remove_components})
+                           options={"remove_components": config.remove_components},
+                           monitor=monitor)

@@ -5,7 +5,8 @@
 and a message, the node executables into one FATAL line and exit status 1.
 """
 
-__all__ = ["EmbeddingError", "EmptyPhraseError", "ModelError", "CorpusError", "LabelFileError"]
+__all__ = ["EmbeddingError", "EmptyPhraseError", "ModelError", "CorpusError", "LabelFileError",
+           "EmbeddingUnavailableError", "ModelLoadingError"]
 
 
 class EmbeddingError(Exception):
@@ -26,3 +27,11 @@ class CorpusError(EmbeddingError):
 
 class LabelFileError(EmbeddingError):
     """A map_labelling label file is missing or malformed."""
+
+
+class EmbeddingUnavailableError(EmbeddingError):
+    """The embedding service cannot be reached (not advertised yet, or its server went away)."""
+
+
+class ModelLoadingError(EmbeddingError):
+    """The embedding server is up but its model is still loading (or training)."""

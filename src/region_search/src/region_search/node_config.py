@@ -59,6 +59,8 @@ class BackendConfig(NodeConfig):
     seed: int = param(_WORD2VEC.seed, "word2vec seed (one worker: reproducible training)")
     remove_components: int = param(1, "common directions removed from word2vec vectors (mean and "
                                    "top principal components; -1: keep raw)", minimum=-1)
+    diagnostics_period: float = param(1.0, "seconds between /diagnostics reports of the loading "
+                                      "progress and state (0: none)", minimum=0.0)
 
     @property
     def word2vec(self) -> Word2VecParams:
@@ -73,8 +75,11 @@ class RegionRecommenderConfig(NodeConfig):
 
     labels_path: str = param("", "map_labelling JSON label file; re-read when it changes")
     embedding_service: str = param("/embedding_server/embed", "the embedding server's ~embed")
-    wait_for_embedding: float = param(120.0, "seconds to wait for the embedding service at start-up",
-                                      minimum=0.0)
+    embedding_check_period: float = param(1.0, "seconds between checks of the embedding service "
+                                          "while it is missing or still loading (waits as long "
+                                          "as it takes)", minimum=0.01)
+    log_period: float = param(10.0, "seconds between log lines about what it still waits for",
+                              minimum=0.0)
     layer_service: str = param("/igmm_layers/locate_objects", "igmm_layers regions layer "
                                "(LocateObjects); optional, never waited for; '' disables it")
     layer_period: float = param(2.0, "seconds between queries of the regions layer", minimum=0.0)

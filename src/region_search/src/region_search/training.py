@@ -29,6 +29,7 @@ import numpy as np
 from region_search.corpora import DEFAULT_WORDNET_DIR, WordNet, brown_sentences, file_fingerprint, find_brown
 from region_search.embeddings import WordEmbeddings
 from region_search.errors import CorpusError, ModelError
+from region_search.progress import LoadProgress
 
 __all__ = ["Word2VecParams", "stable_hash", "train_word2vec", "default_cache_dir",
            "corpus_sentences", "cached_word2vec", "load_pretrained", "load_embeddings", "SOURCES"]
@@ -63,8 +64,9 @@ def default_cache_dir() -> Path:
 
 
 def train_word2vec(sentences: Sequence[List[str]], params: Word2VecParams = Word2VecParams(),
-                   *, progress: bool = False):
-    """(KeyedVectors, counts) of a reproducible word2vec training (one worker, fixed seed)."""
+                   *, progress: bool = False, monitor: Optional[LoadProgress] = None):
+    """(KeyedVectors, counts) of a reproducible word2vec training (one worker, fixed seed).
+    `progress`: a tqdm bar of the epochs; `monitor`: told of every finished epoch."""
     from gensim.models import Word2Vec
     from gensim.models.callbacks import CallbackAny2Vec
 
@@ -86,10 +88,20 @@ def train_word2vec(sentences: Sequence[List[str]], params: Word2VecParams = Word
                 self.bar.close()
 
         callbacks.append(_Epochs())
+    if monitor is not None:
+
+        class _Monitor(CallbackAny2Vec):
+            def on_epoch_end(self, model):
+                monitor.epoch_done()
+
+        monitor.training_started(params.epochs, sum(len(s) for s in sentences))
+        callbacks.append(_Monitor())
     model = Word2Vec(sentences, vector_size=params.vector_size, window=params.window,
                      min_count=params.min_count, sg=params.sg, negative=params.negative,
                      sample=params.sample, epochs=params.epochs, seed=params.seed, workers=1,
                      hashfxn=stable_hash, callbacks=callbacks)
+    if monitor is not None:
+        monitor.training_done()
     if len(model.wv) == 0:
         raise CorpusError(f"no word occurs min_count={params.min_count} times in the corpus")
     counts = np.array([model.wv.get_vecattr(w, "count") for w in model.wv.index_to_key],
@@ -121,11 +133,12 @@ def corpus_sentences(corpora: Sequence[str], *, brown_path: str = "",
 def cached_word2vec(corpora: Sequence[str], *, brown_path: str = "",
                     wordnet_dir: str = DEFAULT_WORDNET_DIR,
                     params: Word2VecParams = Word2VecParams(), cache_dir: Optional[Path] = None,
-                    progress: bool = False, options: Optional[Dict] = None
-                    ) -> Tuple[WordEmbeddings, Dict]:
+                    progress: bool = False, options: Optional[Dict] = None,
+                    monitor: Optional[LoadProgress] = None) -> Tuple[WordEmbeddings, Dict]:
     """Word2vec on the corpora, trained once and then loaded (memory-mapped) from the cache.
 
-    Returns (embeddings, info) with info keys: cache_hit, seconds, path, corpora, params.
+    Returns (embeddings, info) with info keys: cache_hit, seconds, path, corpora, params (and
+    train_seconds when it trained). `monitor` (optional) follows the stages and epochs.
     """
     import gensim
 
@@ -140,11 +153,16 @@ def cached_word2vec(corpora: Sequence[str], *, brown_path: str = "",
     if not (folder / "meta.json").is_file():
         cache_dir.mkdir(parents=True, exist_ok=True)
         with open(cache_dir / f".{folder.name}.lock", "w") as lock:
+            if monitor is not None:
+                monitor.set_stage("waiting for another process training the same model")
             fcntl.flock(lock, fcntl.LOCK_EX)  # another process may be training the same model
             if not (folder / "meta.json").is_file():
-                _train_into(folder, corpora, brown_path, wordnet_dir, params, progress)
+                info["train_seconds"] = _train_into(folder, corpora, brown_path, wordnet_dir,
+                                                    params, progress, monitor)
                 info["cache_hit"] = False
     info.setdefault("cache_hit", True)
+    if monitor is not None:
+        monitor.set_stage("loading the cached vectors")
     embeddings = _load_folder(folder, wordnet_dir, options)
     info["seconds"] = time.monotonic() - start
     return embeddings, info
@@ -166,11 +184,18 @@ def _corpus_fingerprints(corpora, brown_path, wordnet_dir) -> Dict[str, str]:
     return prints
 
 
-def _train_into(folder: Path, corpora, brown_path, wordnet_dir, params, progress) -> None:
+def _train_into(folder: Path, corpora, brown_path, wordnet_dir, params, progress,
+                monitor: Optional[LoadProgress] = None) -> float:
+    """Train into `folder` (atomically); the seconds it took, corpus reading included."""
     start = time.monotonic()
+    if monitor is not None:
+        monitor.set_stage("reading the corpus")
     sentences, _ = corpus_sentences(corpora, brown_path=brown_path, wordnet_dir=wordnet_dir)
-    LOG.info("training word2vec on %s (%d sentences)", "+".join(corpora), len(sentences))
-    kv, counts = train_word2vec(sentences, params, progress=progress)
+    tokens = sum(len(s) for s in sentences)
+    LOG.info("training word2vec on %s (%d sentences, %d tokens, %d epochs; this is done once, "
+             "then the model is loaded from %s)", "+".join(corpora), len(sentences), tokens,
+             params.epochs, folder.parent)
+    kv, counts = train_word2vec(sentences, params, progress=progress, monitor=monitor)
     tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
     try:
         kv.save(str(tmp / "vectors.kv"), sep_limit=0)  # arrays in .npy files: memory-mappable
@@ -182,6 +207,7 @@ def _train_into(folder: Path, corpora, brown_path, wordnet_dir, params, progress
         os.replace(tmp, folder)  # atomic: a folder with meta.json is always complete
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+    return meta["train_seconds"]
 
 
 def _load_folder(folder: Path, wordnet_dir: str = DEFAULT_WORDNET_DIR,
@@ -284,17 +310,20 @@ def _wordnet_base_forms(wordnet_dir: str):
 def load_embeddings(source: str = "auto", *, pretrained_path: str = "", brown_path: str = "",
                     wordnet_dir: str = DEFAULT_WORDNET_DIR, params: Word2VecParams = Word2VecParams(),
                     cache_dir: Optional[Path] = None, progress: bool = False,
-                    limit: Optional[int] = None,
-                    options: Optional[Dict] = None) -> Tuple[WordEmbeddings, Dict]:
+                    limit: Optional[int] = None, options: Optional[Dict] = None,
+                    monitor: Optional[LoadProgress] = None) -> Tuple[WordEmbeddings, Dict]:
     """The embedding model a node serves.
 
     source: "auto" (Brown + WordNet glosses when a Brown corpus is found, else WordNet glosses),
     "brown", "wordnet", "brown+wordnet", or "pretrained" (then `pretrained_path` is required).
     options: keyword arguments of WordEmbeddings (e.g. remove_components).
+    monitor: follows the stages and training epochs (the embedding server reports it).
     """
     if source == "pretrained":
         if not pretrained_path:
             raise ModelError("source 'pretrained' needs pretrained_path")
+        if monitor is not None:
+            monitor.set_stage("loading pretrained vectors")
         return load_pretrained(pretrained_path, cache_dir=cache_dir, limit=limit,
                                wordnet_dir=wordnet_dir, options=options)
     if source not in SOURCES:
@@ -306,4 +335,4 @@ def load_embeddings(source: str = "auto", *, pretrained_path: str = "", brown_pa
         corpora = source.split("+")
     return cached_word2vec(list(corpora), brown_path=brown_path, wordnet_dir=wordnet_dir,
                            params=params, cache_dir=cache_dir, progress=progress,
-                           options=options)
+                           options=options, monitor=monitor)

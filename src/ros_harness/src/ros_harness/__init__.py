@@ -1,5 +1,6 @@
 """Real ROS and database processes for tests, demos and benchmarks (no mocks)."""
 from ros_harness.errors import HarnessError, ProcessDied
+from ros_harness.fault_proxy import FaultProxy
 from ros_harness.launching import LaunchSet
 from ros_harness.processes import (
     ManagedProcess,
@@ -14,6 +15,7 @@ from ros_harness.processes import (
 )
 
 __all__ = [
+    "FaultProxy",
     "HarnessError",
     "ProcessDied",
     "LaunchSet",

@@ -23,7 +23,14 @@ from pathlib import Path
 import pytest
 
 from ros_harness.launching import LaunchSet
-from ros_harness.processes import ManagedProcess, MongoWireServer, PouchDBServer, RosCore, wait_until
+from ros_harness.processes import (
+    START_TIMEOUT,
+    ManagedProcess,
+    MongoWireServer,
+    PouchDBServer,
+    RosCore,
+    wait_until,
+)
 
 MARKERS = {
     "ros": "starts a real roscore and ROS nodes",
@@ -145,7 +152,7 @@ def xvfb_display(tmp_path_factory):
     log = tmp_path_factory.mktemp("xvfb") / "xvfb.log"
     xvfb = ManagedProcess(["Xvfb", f":{number}", "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
                           name="Xvfb", log_path=log).start()
-    wait_until(lambda: Path(f"/tmp/.X11-unix/X{number}").exists(), 20, what="Xvfb socket",
+    wait_until(lambda: Path(f"/tmp/.X11-unix/X{number}").exists(), START_TIMEOUT, what="Xvfb socket",
                check=xvfb.check_alive)
     yield f":{number}"
     xvfb.stop(timeout=5)

@@ -3,29 +3,41 @@
     ros_mongo_bag import run1.bag run2.bag --db-url http://127.0.0.1:5984/robot_data --tags lab
     ros_mongo_bag export out.bag --db-url mongodb://127.0.0.1:27017/robot_data --query "tags lidar"
     ros_mongo_bag info --db-url http://127.0.0.1:5984/robot_data
+    ros_mongo_bag setup --db-url http://admin@127.0.0.1:5984/robot_data --db-credentials-file ~/.admin
 
+Credentials: keep --db-url password-free (a password on the command line shows in `ps` and logs)
+and give it through --db-credentials-file (one line, 'user:password' or 'password') or the
+environment (ROS_MONGO_DB_PASSWORD, ROS_MONGO_DB_USER). The URL itself may also come from
+ROS_MONGO_DB_URL. `setup` creates the indexes / design documents reads use; run it once with an
+admin account, so that robots need only document-write rights and readers only read rights.
 Exits 0 on success, 1 with one "ERROR: ..." line otherwise.
 """
 import argparse
+import os
 import re
 import sys
 from typing import List, Optional
 
-from ros_mongo.bagio import export_bag, import_bag
+from ros_mongo.bagio import BATCH_BYTES, export_bag, import_bag
 from ros_mongo.errors import StoreError
 from ros_mongo.query import parse_query, query_from_mapping
 from ros_mongo.store import open_store
+from ros_mongo.urls import PASSWORD_ENV, password_in_url, redact_url
 
 __all__ = ["main"]
 
 DEFAULT_URL = "http://127.0.0.1:5984/robot_data"
+URL_ENV = "ROS_MONGO_DB_URL"
 
 
 def parse_args(argv: List[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="ros_mongo_bag", description=__doc__.splitlines()[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
                                      epilog="\n".join(__doc__.splitlines()[1:]))
-    parser.add_argument("--db-url", default=DEFAULT_URL, help=f"database URL (default {DEFAULT_URL})")
+    parser.add_argument("--db-url", default=os.environ.get(URL_ENV) or DEFAULT_URL,
+                        help=f"database URL, password-free (default ${URL_ENV}, else {DEFAULT_URL})")
+    parser.add_argument("--db-credentials-file", default=None,
+                        help=f"file holding 'user:password' or 'password' (else ${PASSWORD_ENV})")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     commands = parser.add_subparsers(dest="command", required=True)
     up = commands.add_parser("import", help="store the messages of bags")
@@ -34,6 +46,9 @@ def parse_args(argv: List[str]) -> argparse.Namespace:
     up.add_argument("--tags", nargs="*", default=[], help="tags for every message")
     up.add_argument("--session-id", help="session id (default: the bag's file name)")
     up.add_argument("--robot-id", help="robot id")
+    up.add_argument("--batch-mb", type=float, default=BATCH_BYTES / 2 ** 20,
+                    help=f"MB of messages per write batch (default {BATCH_BYTES / 2 ** 20:g}; at most "
+                         f"three batches are held at once)")
     down = commands.add_parser("export", help="write stored messages to a new bag")
     down.add_argument("bag", help="the bag to write (refuses to overwrite without --force)")
     down.add_argument("--query", default="", help='YAML/JSON query or "<key> <value>" ("tags lidar")')
@@ -45,8 +60,10 @@ def parse_args(argv: List[str]) -> argparse.Namespace:
     down.add_argument("--compression", choices=["none", "bz2", "lz4"], default="none")
     down.add_argument("--force", action="store_true", help="overwrite an existing bag")
     commands.add_parser("info", help="stored topics and message counts")
+    commands.add_parser("setup", help="create the indexes / design documents (admin account, once)")
     for sub in commands.choices.values():  # options work before or after the command
         sub.add_argument("--db-url", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
+        sub.add_argument("--db-credentials-file", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
         sub.add_argument("--no-progress", action="store_true", default=argparse.SUPPRESS,
                          help=argparse.SUPPRESS)
     return parser.parse_args(argv)
@@ -64,11 +81,23 @@ def _export_query(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> None:
     progress = not args.no_progress
-    with open_store(args.db_url) as store:
-        if args.command == "import":
+    if password_in_url(args.db_url):
+        print(f"WARNING: the database URL {redact_url(args.db_url)} holds a secret, which shows in `ps` "
+              f"and logs: use --db-credentials-file or ${PASSWORD_ENV}", file=sys.stderr)
+    with open_store(args.db_url, credentials_file=args.db_credentials_file) as store:
+        if args.command == "setup":
+            if store.ensure_indexes():
+                print(f"{store.url}: indexes ready")
+            else:
+                raise StoreError(f"{store.url}: this account may not create indexes; run setup with an "
+                                 f"admin account")
+        elif args.command == "import":
+            if not args.batch_mb > 0:
+                raise StoreError(f"--batch-mb must be positive, got {args.batch_mb!r}")
             for bag in args.bags:
                 result = import_bag(bag, store, topics=args.topics, tags=args.tags,
-                                    session_id=args.session_id, robot_id=args.robot_id, progress=progress)
+                                    session_id=args.session_id, robot_id=args.robot_id, progress=progress,
+                                    batch_bytes=int(args.batch_mb * 2 ** 20))
                 print(f"{bag}: {result.messages} messages, {result.bytes / 1e6:.1f} MB in "
                       f"{result.seconds:.1f} s ({result.rate:.0f} msg/s, {result.megabytes_per_second:.1f} "
                       f"MB/s) into {store.url}")

@@ -3,7 +3,9 @@
 Message-field conditions use the operators CouchDB Mango and MongoDB share: a plain value means
 equality, a mapping may use $eq $ne $gt $gte $lt $lte $in $nin $exists, and a two-element list
 [low, high] means low <= value <= high. Field paths are dotted ("header.frame_id",
-"pose.pose.position.x", "ranges.0").
+"pose.pose.position.x", "ranges.0"). What each operator matches (missing fields, arrays, nulls,
+"NaN"/"Infinity") is defined once, the same for both backends: see `ros_mongo.documents`.
+Range bounds are numbers or strings, all of one kind per field.
 """
 import math
 import re
@@ -142,7 +144,9 @@ def _condition(path: str, cond) -> Dict[str, Any]:
     if isinstance(cond, (list, tuple)):
         if len(cond) != 2:
             raise QueryError(f"field {path!r}: a list condition must be [low, high], got {cond!r}")
-        return {"$gte": _scalar(path, cond[0]), "$lte": _scalar(path, cond[1])}
+        bounds = {"$gte": _scalar(path, cond[0]), "$lte": _scalar(path, cond[1])}
+        _check_range(path, bounds)
+        return bounds
     if not isinstance(cond, dict) or not cond:
         raise QueryError(f"field {path!r}: condition must be a value, [low, high] or an operator "
                          f"mapping, got {cond!r}")
@@ -160,7 +164,16 @@ def _condition(path: str, cond) -> Dict[str, Any]:
             out[op] = operand
         else:
             out[op] = _scalar(path, operand)
+    _check_range(path, out)
     return out
+
+
+def _check_range(path: str, cond: Dict[str, Any]) -> None:
+    bounds = [cond[op] for op in ("$gt", "$gte", "$lt", "$lte") if op in cond]
+    kinds = {"string" if isinstance(b, str) else "number" if isinstance(b, (int, float))
+             and not isinstance(b, bool) else repr(b) for b in bounds}
+    if kinds - {"string", "number"} or len(kinds) > 1:
+        raise QueryError(f"field {path!r}: range bounds must all be numbers or all strings, got {bounds!r}")
 
 
 def _scalar(path: str, value):

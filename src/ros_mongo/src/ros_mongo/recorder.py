@@ -1,17 +1,31 @@
 """The recorder core (no ROS): serialized messages in, batched durable writes out.
 
-`receive()` is called from subscriber callbacks and only enqueues; beyond `max_queue_bytes` (the
-database is slower than the topics) messages go straight to the spool file instead, undecoded, and
-are decoded and stored when the spool is drained: a message is dropped (and counted) only if the
-spool cannot be written either. Writer threads (`writers`, default 2, so one encodes while the
-other waits for the database) take batches (up to `batch_size` messages or `batch_period` seconds),
-decode their fields and write each batch with one bulk request. While the database is unreachable
-batches go to the spool file; the first writer probes the database every `retry_period` seconds and,
-once it answers, drains the spool (each record once: ids dedupe).
+`receive()` is called from subscriber callbacks and only enqueues; beyond `max_queue_bytes` of
+memory (payload plus a fixed per-message overhead, `ITEM_OVERHEAD`) messages go straight to the
+spool file instead, undecoded, and are decoded and stored when the spool is drained. Writer threads
+(`writers`, default 2, so one encodes while another waits for the database) take batches (up to
+`batch_size` messages or `batch_period` seconds) and decode them in parallel, but write them strictly
+in the order they were taken (a ticket per batch); while the spool holds anything, new batches are
+appended behind it, so the database always holds a prefix of what went through the queue.
+
+Errors (ros_mongo.errors): *retry later* (StoreUnavailable) and *operator must act* (StoreRefused,
+or any other unexpected store error) keep every message: the batch goes to the spool, `fault` holds
+the server's reason (reported as ERROR on /diagnostics by the node), and the first writer probes
+every `retry_period` seconds (doubling up to 10x while it fails) and drains the spool once writes
+work again. A draining batch that fails is never skipped: it stays in the spool. Documents refused
+on their own merits (DocumentsRejected, after splitting) go to the quarantine file (counted
+`rejected` and `quarantined`). A writer that fails unexpectedly (SpoolError, an answer of an
+unexpected shape, a bug) spools its batch, reports the failure and is restarted (`writer_restarts`).
+
+`dropped` counts a message only when memory and disk are both exhausted: the queue is full and the
+spool refuses it (SpoolFull: size limit or minimum free space), or a quarantine write fails.
 
 What a SIGKILL can lose: only messages not yet written to the database or the spool, i.e. those
-received during the last `batch_period` plus the writes in flight (bounded by `max_queue_bytes`).
-Everything counted as stored or spooled survives (the spool is drained by the next recorder using it).
+received during the last `batch_period` plus the batches waiting for their turn to be written
+(bounded by `max_queue_bytes`). Everything counted as stored or spooled survives (the spool is drained
+by the next recorder using it). Per topic, the database plus the spool hold a gap-free prefix of the
+received messages, except when the queue overflowed (spilled messages overtake queued ones) or the
+disk was full (a batch that could not be spooled waits in memory and is written after later ones).
 """
 import logging
 import threading
@@ -22,15 +36,20 @@ from typing import Deque, Dict, List, Optional, Sequence, Tuple
 import genpy
 
 import ros_mongo.msgtypes as msgtypes
-from ros_mongo.errors import SpoolError, StoreError, StoreUnavailable, UnknownTypeError
+from ros_mongo.errors import DocumentsRejected, SpoolError, StoreError, UnknownTypeError
+from ros_mongo.quarantine import Quarantine
 from ros_mongo.records import MessageRecord, TopicInfo, make_record, new_message_id
 from ros_mongo.spool import Spool
 from ros_mongo.store import MessageStore
 
-__all__ = ["Recorder"]
+__all__ = ["Recorder", "ITEM_OVERHEAD"]
 
 log = logging.getLogger(__name__)
-_Key = Tuple[str, str, str]
+_Key = Tuple[str, str, str, str]  # topic, type, md5sum, publisher (callerid)
+
+#: Bytes a queued message costs beyond its payload (the bytes object, the queue entry, its tuple
+#: and numbers, measured with sys.getsizeof on CPython 3.8-3.11).
+ITEM_OVERHEAD = 200
 
 
 class Recorder:
@@ -40,21 +59,27 @@ class Recorder:
         store: an opened (or lazily connecting) MessageStore.
         spool: an opened Spool (leftovers from an earlier run are drained too).
         batch_size, batch_period: a batch is written when either is reached.
-        max_queue_bytes: received bytes waiting in memory; more go to the spool.
-        retry_period: seconds between probes of an unreachable database.
+        max_queue_bytes: memory for received messages waiting (payload + ITEM_OVERHEAD each);
+            more go to the spool.
+        retry_period: seconds between probes of a failing database (doubling up to 10x).
         writers: writer threads.
         session_id, robot_id, tags: stored with every message; topic_tags adds tags per topic.
+        quarantine_path: where refused documents go (default: the spool path + ".quarantine").
     """
 
     def __init__(self, store: MessageStore, spool: Spool, *, batch_size: int = 500,
                  batch_period: float = 0.2, max_queue_bytes: int = 1 << 30, retry_period: float = 1.0,
                  writers: int = 2, session_id: Optional[str] = None, robot_id: Optional[str] = None,
-                 tags: Sequence[str] = (), topic_tags: Optional[Dict[str, Sequence[str]]] = None):
+                 tags: Sequence[str] = (), topic_tags: Optional[Dict[str, Sequence[str]]] = None,
+                 quarantine_path: Optional[str] = None):
         if batch_size < 1 or batch_period <= 0 or max_queue_bytes < 1 or retry_period <= 0 or writers < 1:
-            raise ValueError("batch_size, batch_period, max_queue_bytes, retry_period and writers must be "
-                             "positive")
+            raise ValueError(f"batch_size, batch_period, max_queue_bytes, retry_period and writers must "
+                             f"be positive, got {batch_size!r}, {batch_period!r}, {max_queue_bytes!r}, "
+                             f"{retry_period!r}, {writers!r}")
         self.writers = int(writers)
         self.store, self.spool = store, spool
+        self.quarantine = Quarantine(quarantine_path or str(spool.path) + ".quarantine",
+                                     min_free_bytes=0)
         self.batch_size, self.batch_period = int(batch_size), float(batch_period)
         self.max_queue_bytes, self.retry_period = int(max_queue_bytes), float(retry_period)
         self.session_id, self.robot_id, self.tags = session_id, robot_id, list(tags)
@@ -65,27 +90,36 @@ class Recorder:
         self._topics: Dict[_Key, TopicInfo] = {}
         self._classes: Dict[_Key, Optional[type]] = {}
         self._stopping = False
+        self._deadline = float("inf")
         self._threads: List[threading.Thread] = []
         self._count_lock = threading.Lock()
         self._spill_lock = threading.Lock()
         self._spilled_topics: set = set()
-        self.db_ok, self._next_probe = True, 0.0
+        self._order = threading.Condition()
+        self._tickets = 0       # batches taken
+        self._turn = 0          # the batch whose turn it is to be written
+        self.db_ok, self._next_probe, self._failures = True, 0.0, 0
+        self.fault = ""         # the current fault (the server's reason), "" when writes work
+        self.last_fault = ""    # the latest fault, kept after it cleared
         self.received = self.stored = self.dropped = self.rejected = self.spooled = 0
+        self.quarantined = self.writer_restarts = 0
 
     # -- called from subscriber threads -----------------------------------------------------------
     def receive(self, topic: str, raw: bytes, receive: genpy.Time, msg_type: str, md5sum: str,
                 definition: str = "", latching: bool = False, callerid: str = "") -> bool:
         """Enqueue one serialized message (or spool it when the queue is full); False if dropped."""
-        key = (topic, msg_type, md5sum)
+        key = (topic, msg_type, md5sum, callerid)
+        cost = len(raw) + ITEM_OVERHEAD
         with self._cond:
             self.received += 1
             if key not in self._topics:
-                info = TopicInfo(topic, msg_type, md5sum, definition, bool(latching), callerid)
+                info = TopicInfo(topic, msg_type, md5sum, definition, bool(latching), callerid,
+                                 self.robot_id or "")
                 self._topics[key] = info
                 self._queue.append((info,))
-            if self._queued_bytes + len(raw) <= self.max_queue_bytes:
+            if self._queued_bytes + cost <= self.max_queue_bytes:
                 self._queue.append((key, raw, receive.secs, receive.nsecs))
-                self._queued_bytes += len(raw)
+                self._queued_bytes += cost
                 if len(self._queue) >= self.batch_size:
                     self._cond.notify()
                 return True
@@ -93,36 +127,37 @@ class Recorder:
 
     def _spill(self, key: _Key, raw: bytes, receive: genpy.Time) -> bool:
         """Straight to the spool, undecoded (the fields are decoded when it is drained)."""
-        record = MessageRecord(new_message_id(receive.secs, receive.nsecs), key[0], key[1], key[2], raw,
-                               receive.secs, receive.nsecs, tags=self.tags + self.topic_tags.get(key[0], []),
-                               session_id=self.session_id, robot_id=self.robot_id)
+        record = self._raw_record(key, raw, receive.secs, receive.nsecs)
         with self._spill_lock:
             entries: list = [record]
             if (key, self.spool.generation) not in self._spilled_topics:
                 entries.insert(0, self._topics[key])  # a later recorder may drain this spool
-                self._spilled_topics.add((key, self.spool.generation))
             try:
                 self.spool.append(entries)
             except SpoolError as err:
                 self._add("dropped", 1)
                 log.error("dropped a message on %s: queue full and %s", key[0], err)
                 return False
+            self._spilled_topics.add((key, self.spool.generation))
         self._add("spooled", 1)
         return True
 
     def counts(self) -> Dict[str, int]:
-        """received, stored, dropped, rejected, spooled (ever), spool_pending, queued."""
+        """received, stored, dropped, rejected, quarantined, spooled (ever), spool_pending, queued,
+        queued_bytes, writer_restarts."""
         return {"received": self.received, "stored": self.stored, "dropped": self.dropped,
-                "rejected": self.rejected, "spooled": self.spooled,
-                "spool_pending": self.spool.pending_records, "queued": len(self._queue)}
+                "rejected": self.rejected, "quarantined": self.quarantined, "spooled": self.spooled,
+                "spool_pending": self.spool.pending_records, "queued": len(self._queue),
+                "queued_bytes": self._queued_bytes, "writer_restarts": self.writer_restarts}
 
-    # -- the writer ----------------------------------------------------------------------------
+    # -- the writers ---------------------------------------------------------------------------
     def start(self) -> "Recorder":
         if self.spool.pending:
             log.info("spool %s holds %d messages from an earlier run; draining them",
                      self.spool.path, self.spool.pending_records)
-        self._threads = [threading.Thread(target=self._run, args=(index,), name=f"ros_mongo_writer_{index}",
-                                          daemon=True) for index in range(self.writers)]
+        self._threads = [threading.Thread(target=self._supervise, args=(index,),
+                                          name=f"ros_mongo_writer_{index}", daemon=True)
+                         for index in range(self.writers)]
         for thread in self._threads:
             thread.start()
         return self
@@ -136,13 +171,28 @@ class Recorder:
             self._cond.notify_all()
         for thread in self._threads:
             thread.join(max(0.0, self._deadline + 5.0 - time.monotonic()))
+        self.quarantine.close()
         return self.counts()
+
+    def _supervise(self, index: int) -> None:
+        """Run a writer; restart it after any unexpected failure (reported, never silent)."""
+        while True:
+            try:
+                self._run(index)
+                return
+            except Exception as err:  # noqa: BLE001 - a writer must never die silently
+                self._add("writer_restarts", 1)
+                self._set_fault(f"writer {index} failed and was restarted: {type(err).__name__}: {err}")
+                log.exception("writer %d failed; restarting it", index)
+                if self._stopping and time.monotonic() > self._deadline:
+                    return
+                time.sleep(min(self.retry_period, 1.0))
 
     def _run(self, index: int) -> None:
         while True:
-            items = self._take()
-            if items:
-                self._write(items)
+            items, ticket = self._take()
+            if ticket is not None:
+                self._write(items, ticket)
             if index == 0:  # one thread probes and drains
                 self._probe_and_drain()
             with self._cond:
@@ -154,7 +204,7 @@ class Recorder:
             while self.spool.pending and self.db_ok and time.monotonic() < self._deadline:
                 self._drain_once()
 
-    def _take(self) -> List[tuple]:
+    def _take(self) -> Tuple[List[tuple], Optional[int]]:
         with self._cond:
             deadline = time.monotonic() + self.batch_period
             while len(self._queue) < self.batch_size and not self._stopping:
@@ -168,55 +218,145 @@ class Recorder:
                 items.append(item)
                 if len(item) > 1:
                     count += 1
-                    size += len(item[1])
+                    size += len(item[1]) + ITEM_OVERHEAD
             self._queued_bytes -= size
-            return items
+            if not items:
+                return items, None
+            ticket = self._tickets
+            self._tickets += 1
+            return items, ticket
 
-    def _write(self, items: List[tuple]) -> None:
-        entries = [item[0] if len(item) == 1 else self._record(*item) for item in items]
-        if self.db_ok:
+    def _write(self, items: List[tuple], ticket: int) -> None:
+        """Decode (in parallel with other writers), then write in ticket order."""
+        try:
+            entries = [item[0] if len(item) == 1 else self._record(*item) for item in items]
+        except Exception as err:  # noqa: BLE001 - a decoding bug must not lose the batch
+            log.exception("cannot decode a batch; storing it without decoded fields")
+            self._set_fault(f"decoding failed: {type(err).__name__}: {err}")
+            entries = [item[0] if len(item) == 1 else self._raw_record(*item) for item in items]
+        with self._order:
+            while self._turn != ticket:
+                self._order.wait()
+        try:
+            self._write_in_turn(entries, items)
+        finally:
+            with self._order:
+                self._turn += 1
+                self._order.notify_all()
+
+    def _write_in_turn(self, entries: list, items: List[tuple]) -> None:
+        unexpected = None
+        if self.db_ok and not self.spool.pending:
             try:
                 self._store(entries)
+                self._clear_fault()
                 return
-            except StoreUnavailable as err:
+            except StoreError as err:  # retry later / operator must act: keep everything
                 self._went_down(err)
-        self.spool.append(entries)
+            except Exception as err:  # noqa: BLE001 - kept below, then the writer restarts
+                self._went_down(StoreError(f"unexpected {type(err).__name__} while writing: {err}"))
+                unexpected = err
+        try:
+            self._spool(entries)
+        except SpoolError as err:
+            self._keep_in_memory(items, err)
+        if unexpected is not None:
+            raise unexpected
+
+    def _spool(self, entries: list) -> None:
+        with self._spill_lock:
+            generation = self.spool.generation
+            missing = []  # a later recorder may drain this spool: each topic's info before its messages
+            for key in dict.fromkeys((e.topic, e.msg_type, e.md5sum, e.callerid) for e in entries
+                                     if isinstance(e, MessageRecord)):
+                if (key, generation) not in self._spilled_topics and key in self._topics:
+                    missing.append(self._topics[key])
+            entries = missing + entries
+            self.spool.append(entries)
+            for entry in entries:
+                if isinstance(entry, TopicInfo):
+                    self._spilled_topics.add(((entry.topic, entry.msg_type, entry.md5sum, entry.callerid),
+                                              generation))
         self._add("spooled", sum(isinstance(e, MessageRecord) for e in entries))
+
+    def _keep_in_memory(self, items: List[tuple], err: SpoolError) -> None:
+        """The spool is full: back to the front of the queue while memory lasts, else dropped."""
+        size = sum(len(item[1]) + ITEM_OVERHEAD for item in items if len(item) > 1)
+        messages = sum(len(item) > 1 for item in items)
+        with self._cond:
+            if self._queued_bytes + size <= self.max_queue_bytes and not self._stopping:
+                self._queue.extendleft(reversed(items))
+                self._queued_bytes += size
+                kept = True
+            else:
+                kept = False
+        if kept:
+            self._set_fault(f"{self.fault or 'database failing'}; and the spool refuses writes: {err}")
+            time.sleep(min(self.retry_period, 1.0))  # wait for the database or for disk space
+        else:
+            self._add("dropped", messages)
+            self._set_fault(f"dropped {messages} messages: memory and spool both exhausted ({err})")
+            log.error("dropped %d messages: memory full and %s", messages, err)
 
     def _add(self, counter: str, value: int) -> None:
         with self._count_lock:
             setattr(self, counter, getattr(self, counter) + value)
 
     def _store(self, entries: list) -> None:
+        """Store entries; documents refused on their own merits go to the quarantine file. Any
+        other StoreError propagates (nothing was lost: ids dedupe the retry)."""
         records = [e for e in entries if isinstance(e, MessageRecord)]
+        for entry in entries:
+            if isinstance(entry, TopicInfo):
+                self.store.put_topic(entry)
+        for key in {(r.topic, r.msg_type, r.md5sum, r.callerid) for r in records}:
+            if key in self._topics:  # each topic's definition before its messages
+                self.store.put_topic(self._topics[key])
         try:
-            for entry in entries:
-                if isinstance(entry, TopicInfo):
-                    self.store.put_topic(entry)
-            for key in {(r.topic, r.msg_type, r.md5sum) for r in records}:
-                if key in self._topics:  # each topic's definition before its messages
-                    self.store.put_topic(self._topics[key])
             self.store.insert_records(records)
-            # counted once: a failed attempt that reached the database anyway was not counted
-            self._add("stored", len(records))
-        except StoreUnavailable:
-            raise
-        except StoreError as err:
-            rejected = getattr(err, "rejected", len(records))
-            self._add("rejected", rejected)
-            self._add("stored", len(records) - rejected)
-            log.error("database rejected %d messages: %s", rejected, err)
+        except DocumentsRejected as err:
+            refused = [r for r in records if r.id in err.rejected_ids]
+            if len(refused) != err.rejected:  # the server did not name them all: one at a time
+                refused = [r for r in records if not self._insert_alone(r)]
+            self._quarantine(refused, err)
+            self._add("stored", len(records) - len(refused))
+            return
+        # counted once: a failed attempt that reached the database anyway was not counted
+        self._add("stored", len(records))
+
+    def _insert_alone(self, record: MessageRecord) -> bool:
+        try:
+            self.store.insert_records([record])
+            return True
+        except DocumentsRejected:
+            return False
+
+    def _quarantine(self, refused: List[MessageRecord], err: DocumentsRejected) -> None:
+        self._add("rejected", len(refused))
+        try:
+            self.quarantine.add(refused, self._topics)
+        except SpoolError as error:
+            self._add("dropped", len(refused))
+            log.error("dropped %d refused messages: cannot write the quarantine file: %s", len(refused),
+                      error)
+            return
+        self._add("quarantined", len(refused))
+        log.error("the database refused %d messages on their own merits (kept in %s): %s", len(refused),
+                  self.quarantine.path, err)
+
+    def _raw_record(self, key: _Key, raw: bytes, secs: int, nsecs: int) -> MessageRecord:
+        return MessageRecord(new_message_id(secs, nsecs, self.robot_id), key[0], key[1], key[2], raw,
+                             secs, nsecs, tags=self.tags + self.topic_tags.get(key[0], []),
+                             session_id=self.session_id, robot_id=self.robot_id, callerid=key[3])
 
     def _record(self, key: _Key, raw: bytes, secs: int, nsecs: int) -> MessageRecord:
-        topic = key[0]
-        tags = self.tags + self.topic_tags.get(topic, [])
         cls = self._message_class(key)
         if cls is None:
-            return MessageRecord(new_message_id(secs, nsecs), topic, key[1], key[2], raw, secs, nsecs,
-                                 tags=tags, session_id=self.session_id, robot_id=self.robot_id)
-        return make_record(topic, cls, raw, receive=genpy.Time(secs, nsecs), tags=tags,
+            return self._raw_record(key, raw, secs, nsecs)
+        return make_record(key[0], cls, raw, receive=genpy.Time(secs, nsecs),
+                           tags=self.tags + self.topic_tags.get(key[0], []),
                            session_id=self.session_id, robot_id=self.robot_id,
-                           max_array_len=self.store.max_array_len)
+                           max_array_len=self.store.max_array_len, callerid=key[3])
 
     def _message_class(self, key: _Key) -> Optional[type]:
         if key not in self._classes:
@@ -232,9 +372,9 @@ class Recorder:
         """Decode the fields of spooled records that went to the spool undecoded."""
         for entry in entries:
             if isinstance(entry, TopicInfo):
-                self._topics.setdefault((entry.topic, entry.msg_type, entry.md5sum), entry)
+                self._topics.setdefault((entry.topic, entry.msg_type, entry.md5sum, entry.callerid), entry)
             elif entry.fields is None:
-                key = (entry.topic, entry.msg_type, entry.md5sum)
+                key = (entry.topic, entry.msg_type, entry.md5sum, entry.callerid)
                 cls = self._message_class(key) if key in self._topics else None
                 if cls is not None:
                     try:
@@ -244,10 +384,23 @@ class Recorder:
                     entry.header_stamp = msgtypes.header_stamp(message)
                     entry.fields = msgtypes.to_fields(message, self.store.max_array_len)
 
+    # -- faults ----------------------------------------------------------------------------------
+    def _set_fault(self, text: str) -> None:
+        self.fault = self.last_fault = text
+
+    def _clear_fault(self) -> None:
+        if self.fault:
+            log.info("writes work again (the fault was: %s)", self.fault)
+        self.fault, self._failures = "", 0
+
     def _went_down(self, err: StoreError) -> None:
+        first = self.db_ok
         self.db_ok = False
-        self._next_probe = time.monotonic() + self.retry_period
-        log.warning("database unreachable (%s); spooling to %s", err, self.spool.path)
+        self._failures += 1
+        self._next_probe = time.monotonic() + self.retry_period * min(10, 2 ** (self._failures - 1))
+        self._set_fault(str(err))
+        if first:
+            log.error("cannot write to the database (%s); spooling to %s", err, self.spool.path)
 
     def _probe_and_drain(self) -> None:
         if not self.db_ok:
@@ -256,23 +409,24 @@ class Recorder:
             try:
                 self.store.connect()
                 self.store.ping()
-            except StoreError:
-                self._next_probe = time.monotonic() + self.retry_period
+            except StoreError as err:
+                self._went_down(err)
                 return
             self.db_ok = True
-            log.info("database reachable again; draining %d spooled messages", self.spool.pending_records)
-        if self.spool.pending:
+            log.info("database answers again; draining %d spooled messages", self.spool.pending_records)
+        while self.spool.pending and self.db_ok and time.monotonic() < self._deadline:
             self._drain_once()
 
     def _drain_once(self) -> None:
-        entries, offset = self.spool.read(max_entries=self.batch_size)
+        entries, offset = self.spool.read(max_entries=self.batch_size, max_bytes=32 * 1024 * 1024)
         records = sum(isinstance(e, MessageRecord) for e in entries)
         self._complete(entries)
         try:
             self._store(entries)
-        except StoreUnavailable as err:
+        except StoreError as err:  # never skipped: the entries stay in the spool
             self._went_down(err)
             return
+        self._clear_fault()
         self.spool.commit(offset, records)
         if not self.spool.pending:
             log.info("spool drained")

@@ -1,6 +1,16 @@
-"""What is stored: message records (one per message), topic infos (one per topic and type) and the
-messages read back (StoredMessage)."""
+"""What is stored: message records (one per message), topic infos (one per topic, type, publisher
+and source) and the messages read back (StoredMessage).
+
+Ids never conflict between robots or bags sharing one database:
+- a message id is `<receive time in ns, 19 digits>-<robot id, escaped>-<12 hex digits>`
+  (`new_message_id`); the time prefix makes ids sort by receive time (the MongoDB backend relies
+  on it), the robot id makes two robots' ids differ even for the same nanosecond;
+- a topic info is kept per (topic, type, md5sum, callerid, source), where the source is the robot
+  id (recording) or the bag's session (import), so every publisher of /tf and every robot keeps
+  its own latching, callerid and definition (first writer wins only within one such key).
+"""
 import hashlib
+import re
 import secrets
 import time
 from dataclasses import dataclass, field
@@ -12,12 +22,16 @@ import ros_mongo.msgtypes as msgtypes
 from ros_mongo.errors import UnknownTypeError
 
 __all__ = ["TopicInfo", "MessageRecord", "StoredMessage", "make_record", "new_message_id",
-           "split_time"]
+           "split_time", "id_part"]
+
+_UNSAFE = re.compile(r"[^A-Za-z0-9._~]")
 
 
 @dataclass
 class TopicInfo:
-    """A topic's type, md5sum, full message definition and latching, kept once per topic+type."""
+    """A topic's type, md5sum, full message definition, latching and publisher (callerid), kept
+    once per (topic, type, md5sum, callerid, robot_id); `robot_id` is the source: the recording
+    robot, or the session of an imported bag."""
 
     topic: str
     msg_type: str
@@ -25,15 +39,24 @@ class TopicInfo:
     definition: str
     latching: bool = False
     callerid: str = ""
+    robot_id: str = ""
+
+    @property
+    def key(self) -> tuple:
+        return (self.topic, self.msg_type, self.md5sum, self.callerid, self.robot_id)
 
     @property
     def id(self) -> str:
-        key = f"{self.topic}\n{self.msg_type}\n{self.md5sum}".encode()
-        return "topic-" + hashlib.sha1(key).hexdigest()[:24]
+        key = f"{self.topic}\n{self.msg_type}\n{self.md5sum}"
+        if self.callerid or self.robot_id:
+            key += f"\n{self.callerid}\n{self.robot_id}"
+        return "topic-" + hashlib.sha1(key.encode()).hexdigest()[:24]
 
     @classmethod
-    def of_class(cls, topic: str, msg_class: type, *, latching: bool = False) -> "TopicInfo":
-        return cls(topic, msg_class._type, msg_class._md5sum, msg_class._full_text, latching)
+    def of_class(cls, topic: str, msg_class: type, *, latching: bool = False, callerid: str = "",
+                 robot_id: str = "") -> "TopicInfo":
+        return cls(topic, msg_class._type, msg_class._md5sum, msg_class._full_text, latching,
+                   callerid, robot_id or "")
 
 
 @dataclass
@@ -52,6 +75,7 @@ class MessageRecord:
     tags: List[str] = field(default_factory=list)
     session_id: Optional[str] = None
     robot_id: Optional[str] = None
+    callerid: str = ""   # the publisher (with robot_id: which TopicInfo the message belongs to)
 
     @property
     def receive_time(self) -> float:
@@ -63,15 +87,26 @@ def split_time(seconds: float) -> genpy.Time:
     return genpy.Time.from_sec(seconds)
 
 
-def new_message_id(receive_secs: int, receive_nsecs: int) -> str:
-    """A unique document id that sorts by receive time."""
-    return f"{receive_secs * 1000000000 + receive_nsecs:019d}-{secrets.token_hex(6)}"
+def id_part(text: Optional[str]) -> str:
+    """`text` as a part of a document id: letters, digits and ._~ kept, others %XX (so distinct
+    texts give distinct parts, and '-' never appears: it separates the parts)."""
+    return _UNSAFE.sub(lambda m: "".join(f"%{b:02X}" for b in m.group(0).encode("utf-8")), text or "")
+
+
+def new_message_id(receive_secs: int, receive_nsecs: int, robot_id: Optional[str] = None, *,
+                   token: Optional[str] = None) -> str:
+    """A unique document id that sorts by receive time: `<ns, 19 digits>-<robot>-<token>`
+    (`<ns>-<token>` without a robot id); `token` defaults to 12 random hex digits."""
+    token = token or secrets.token_hex(6)
+    stamp = f"{receive_secs * 1000000000 + receive_nsecs:019d}"
+    return f"{stamp}-{id_part(robot_id)}-{token}" if robot_id else f"{stamp}-{token}"
 
 
 def make_record(topic: str, msg_class: type, raw: bytes, *, receive: Optional[genpy.Time] = None,
                 tags: Sequence[str] = (), session_id: Optional[str] = None,
                 robot_id: Optional[str] = None, record_id: Optional[str] = None,
-                message=None, max_array_len: int = msgtypes.MAX_ARRAY_LEN) -> MessageRecord:
+                message=None, max_array_len: int = msgtypes.MAX_ARRAY_LEN,
+                callerid: str = "") -> MessageRecord:
     """A record for the serialized message `raw` of `msg_class` received at `receive`.
 
     The fields are decoded from `raw` (or taken from `message` when given); bytes that do not
@@ -84,10 +119,10 @@ def make_record(topic: str, msg_class: type, raw: bytes, *, receive: Optional[ge
         except UnknownTypeError:
             message = None
     record = MessageRecord(
-        id=record_id or new_message_id(receive.secs, receive.nsecs), topic=topic,
+        id=record_id or new_message_id(receive.secs, receive.nsecs, robot_id), topic=topic,
         msg_type=msg_class._type, md5sum=msg_class._md5sum, raw=bytes(raw),
         receive_secs=receive.secs, receive_nsecs=receive.nsecs,
-        tags=[str(t) for t in tags], session_id=session_id, robot_id=robot_id)
+        tags=[str(t) for t in tags], session_id=session_id, robot_id=robot_id, callerid=callerid or "")
     if message is not None:
         record.header_stamp = msgtypes.header_stamp(message)
         record.fields = msgtypes.to_fields(message, max_array_len)
@@ -99,19 +134,20 @@ class StoredMessage:
 
     Attributes: id, topic, msg_type, md5sum, receive_time (float s), receive_stamp (genpy.Time,
     exact), header_stamp (float s or None), tags, session_id, robot_id, fields (decoded, as
-    stored), size (bytes); `raw` (exact serialized bytes, fetched on first use when kept apart)
-    and `message()` (the genpy message).
+    stored), size (bytes), callerid (the publisher, "" if unknown); `raw` (exact serialized
+    bytes, fetched on first use when kept apart) and `message()` (the genpy message).
     """
 
     __slots__ = ("id", "topic", "msg_type", "md5sum", "receive_stamp", "header_stamp", "tags",
-                 "session_id", "robot_id", "fields", "size", "_raw", "_load_raw", "_resolve")
+                 "session_id", "robot_id", "fields", "size", "_raw", "_load_raw", "_resolve", "callerid")
 
     def __init__(self, *, id: str, topic: str, msg_type: str, md5sum: str,
                  receive_stamp: genpy.Time, header_stamp: Optional[float], tags: Sequence[str],
                  session_id: Optional[str], robot_id: Optional[str], fields: Optional[Dict[str, Any]],
                  size: int, raw: Optional[bytes], load_raw: Callable[[str], bytes],
-                 resolve: Callable[[str, str], type]):
+                 resolve: Callable[[str, str], type], callerid: str = ""):
         self.id = id
+        self.callerid = callerid
         self.topic = topic
         self.msg_type = msg_type
         self.md5sum = md5sum

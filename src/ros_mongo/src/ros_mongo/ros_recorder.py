@@ -17,7 +17,7 @@ from robot_common.params import NodeConfig, param
 from robot_common.ros_node import read_config, ros_home, run_node
 from ros_mongo.errors import StoreError
 from ros_mongo.recorder import Recorder
-from ros_mongo.spool import Spool
+from ros_mongo.spool import DEFAULT_MAX_BYTES, DEFAULT_MIN_FREE_BYTES, Spool
 from ros_mongo.store import open_store
 
 __all__ = ["RecorderNode", "RecorderConfig", "ORIGINAL_TOPICS", "main"]
@@ -33,6 +33,9 @@ class RecorderConfig(NodeConfig):
 
     db_url: str = param("http://127.0.0.1:5984/robot_data",
                         "http(s):// CouchDB or mongodb:// MongoDB database URL")
+    db_credentials_file: str = param("", "a file holding 'user:password' (or 'password') for db_url, so "
+                                         "the password stays out of db_url, ps and parameter listings; "
+                                         "empty: the environment's ROS_MONGO_DB_PASSWORD, if set")
     topics: List[str] = param(ORIGINAL_TOPICS, "topics always recorded (the four original ones)")
     include: List[str] = param([], "regular expressions: also record published topics whose name "
                                    "matches one")
@@ -48,6 +51,19 @@ class RecorderConfig(NodeConfig):
     spool_path: str = param("", "the spool file for database outages; empty: "
                                 "$ROS_HOME/ros_mongo/<node>.spool")
     spool_fsync: bool = param(False, "fsync every spool append (survives power loss, not only a crash)")
+    spool_max_mb: float = param(DEFAULT_MAX_BYTES / 2 ** 20, "the spool file's size limit (MB); beyond "
+                                                             "it (and a full queue) messages are dropped")
+    spool_min_free_mb: float = param(DEFAULT_MIN_FREE_BYTES / 2 ** 20,
+                                     "free disk space (MB) the spool always leaves, like rosbag record "
+                                     "--min-space")
+    quarantine_path: str = param("", "where documents the database refuses on their own merits are "
+                                     "kept; empty: <spool_path>.quarantine")
+    db_tls_ca_file: str = param("", "CouchDB over https: a CA bundle for a private CA (empty: the "
+                                    "system's); MongoDB: use the URL option tlsCAFile")
+    db_tls_cert_file: str = param("", "CouchDB over https: a client certificate (PEM); MongoDB: the "
+                                      "URL option tlsCertificateKeyFile")
+    db_tls_key_file: str = param("", "CouchDB over https: the client certificate's key (PEM), if not "
+                                     "in db_tls_cert_file")
     session_id: str = param("", "session id on every message; empty: <start time>-<node>")
     robot_id: str = param("", "robot id on every message; empty: the host name")
     tags: List[str] = param([], "tags on every message")
@@ -63,6 +79,23 @@ class RecorderConfig(NodeConfig):
     def check(self) -> None:
         _patterns("include", self.include)
         _patterns("exclude", self.exclude)
+        if self.spool_max_mb <= 0 or self.spool_min_free_mb < 0:
+            raise ConfigError(f"~spool_max_mb must be positive and ~spool_min_free_mb not negative, got "
+                              f"{self.spool_max_mb!r} and {self.spool_min_free_mb!r}")
+        tls = [self.db_tls_ca_file, self.db_tls_cert_file, self.db_tls_key_file]
+        if any(tls) and not self.db_url.lower().startswith("https://"):
+            raise ConfigError("~db_tls_ca_file / ~db_tls_cert_file / ~db_tls_key_file need an https:// "
+                              "CouchDB ~db_url (MongoDB takes its TLS options in the URL)")
+
+    def store_options(self) -> Dict[str, object]:
+        """open_store options (the TLS ones only where set; the credentials file, if any)."""
+        options: Dict[str, object] = {"timeout": self.db_timeout, "blob_threshold": self.blob_threshold,
+                                      "credentials_file": self.db_credentials_file or None}
+        for key, value in (("tls_ca_file", self.db_tls_ca_file), ("tls_cert_file", self.db_tls_cert_file),
+                           ("tls_key_file", self.db_tls_key_file)):
+            if value:
+                options[key] = value
+        return options
 
 
 class RecorderNode:
@@ -73,8 +106,11 @@ class RecorderNode:
     matching ~include, minus those matching ~exclude; ~max_queue_mb bounds memory, the spool at
     ~spool_path takes what does not fit or cannot be written.
     Subscribes: the recorded topics (rospy.AnyMsg: exact bytes, any type).
-    Publishes: /diagnostics (diagnostic_msgs/DiagnosticArray): received, stored, dropped, rejected,
-        spooled, spool_pending, queued, topics.
+    Publishes: /diagnostics (diagnostic_msgs/DiagnosticArray): ERROR with the server's reason while
+        writes fail (the messages are kept: spooled), or after a writer restart until writes work;
+        WARN after drops or quarantined documents; values received, stored, dropped, rejected,
+        quarantined, spooled, spool_pending, queued, queued_bytes, writer_restarts, fault,
+        last_fault, and the count per topic.
     """
 
     def __init__(self, config: RecorderConfig):
@@ -84,15 +120,16 @@ class RecorderNode:
         node = rospy.get_name().strip("/").replace("/", "_")
         self.session_id = config.session_id or time.strftime("%Y%m%dT%H%M%S") + f"-{node}"
         self.robot_id = config.robot_id or socket.gethostname()
-        self.store = open_store(config.db_url, connect=False, timeout=config.db_timeout,
-                                blob_threshold=config.blob_threshold)
+        self.store = open_store(config.db_url, connect=False, **config.store_options())
         spool_path = config.spool_path or str(ros_home() / "ros_mongo" / f"{node}.spool")
-        spool = Spool(spool_path, fsync=config.spool_fsync).open()
+        spool = Spool(spool_path, fsync=config.spool_fsync, max_bytes=int(config.spool_max_mb * 2 ** 20),
+                      min_free_bytes=int(config.spool_min_free_mb * 2 ** 20)).open()
         self.recorder = Recorder(
             self.store, spool, batch_size=config.batch_size,
             batch_period=config.batch_period, max_queue_bytes=int(config.max_queue_mb * 2 ** 20),
             retry_period=config.retry_period, writers=config.writers, session_id=self.session_id,
-            robot_id=self.robot_id, tags=config.tags, topic_tags=config.topic_tags)
+            robot_id=self.robot_id, tags=config.tags, topic_tags=config.topic_tags,
+            quarantine_path=config.quarantine_path or None)
         self.subscribers: Dict[str, rospy.Subscriber] = {}
         self.topic_counts: Dict[str, int] = {}
         self._last_log: Optional[Dict[str, int]] = None
@@ -139,13 +176,16 @@ class RecorderNode:
     def _publish_diagnostics(self, _event) -> None:
         counts = self.recorder.counts()
         status = DiagnosticStatus(name="ros_mongo_server: recorder", hardware_id=self.store.url)
-        if counts["dropped"] or counts["rejected"]:
-            status.level, status.message = DiagnosticStatus.WARN, "messages were dropped or rejected"
-        elif not self.recorder.db_ok:
-            status.level, status.message = DiagnosticStatus.WARN, "database unreachable: spooling"
+        fault = self.recorder.fault
+        if fault:
+            status.level = DiagnosticStatus.ERROR
+            status.message = f"keeping every message (spooling): {fault}"[:500]
+        elif counts["dropped"] or counts["rejected"]:
+            status.level, status.message = DiagnosticStatus.WARN, "messages were dropped or quarantined"
         else:
             status.level, status.message = DiagnosticStatus.OK, f"recording {len(self.subscribers)} topics"
         status.values = [KeyValue(key, str(value)) for key, value in counts.items()]
+        status.values += [KeyValue("fault", fault), KeyValue("last_fault", self.recorder.last_fault)]
         status.values += [KeyValue("session_id", self.session_id), KeyValue("robot_id", self.robot_id)]
         status.values += [KeyValue(f"topic {t}", str(n)) for t, n in sorted(self.topic_counts.items())]
         self.diagnostics.publish(DiagnosticArray(header=Header(stamp=rospy.Time.now()), status=[status]))

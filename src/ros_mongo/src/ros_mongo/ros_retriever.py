@@ -23,6 +23,7 @@ from ros_mongo.records import TopicInfo
 from ros_mongo.replay import Replayer, ReplayItem
 from ros_mongo.srv import Count, CountResponse, Start, StartResponse
 from ros_mongo.store import open_store
+from ros_mongo.urls import PASSWORD_ENV, password_in_url, redact_url
 
 __all__ = ["RetrieverNode", "RetrieverConfig", "configured_query", "raw_class", "main"]
 
@@ -32,7 +33,10 @@ class RetrieverConfig(NodeConfig):
     """The ros_mongo_retriever node's parameters."""
 
     db_url: str = param("http://127.0.0.1:5984/robot_data",
-                        "http(s):// CouchDB or mongodb:// MongoDB database URL")
+                        "http(s):// CouchDB or mongodb:// MongoDB database URL, password-free (a "
+                        "password here shows in parameter listings: use db_credentials_file)")
+    db_credentials_file: str = param("", "file holding 'user:password' or 'password' for db_url "
+                                         "(empty: $ROS_MONGO_DB_PASSWORD, if set)")
     query: str = param("", "YAML/JSON query mapping or the original '<key> <value>' form ('tags "
                            "lidar'); its keys override the query parameters below")
     topics: List[str] = param([], "query: only these topics (empty: all)")
@@ -83,7 +87,11 @@ class RetrieverNode:
     def __init__(self, config: RetrieverConfig):
         self.config = config
         self.query = configured_query(config)
-        self.store = open_store(config.db_url, connect=False, timeout=config.db_timeout)
+        if password_in_url(config.db_url):
+            rospy.logwarn("~db_url %s holds a secret, which shows in parameter listings: use "
+                          "~db_credentials_file or $%s", redact_url(config.db_url), PASSWORD_ENV)
+        self.store = open_store(config.db_url, connect=False, timeout=config.db_timeout,
+                                credentials_file=config.db_credentials_file or None)
         self.publishers: Dict[str, Tuple[TopicInfo, rospy.Publisher]] = {}
         self._lock = threading.Lock()
         self.clock_pub = rospy.Publisher("/clock", Clock, queue_size=10) if config.publish_clock else None

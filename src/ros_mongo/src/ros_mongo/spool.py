@@ -6,6 +6,11 @@ been drained into the database is kept in `<path>.offset` (replaced atomically);
 drained the file is emptied. A torn last frame (the process was killed mid-write) is cut off when the
 spool is opened again. Entries are either topic infos or message records; records keep their ids, so
 draining an entry twice (killed between insert and offset update) still stores it once.
+
+Bounds: `max_bytes` (the file's size, default 4 GiB) and `min_free_bytes` (free space left on the
+file system, default 1 GiB, like `rosbag record --min-space`): an append that would cross either
+raises SpoolFull and writes nothing. The same framed format holds the recorder's quarantine file
+(ros_mongo.quarantine).
 """
 import fcntl
 import json
@@ -20,12 +25,19 @@ from typing import List, Tuple, Union
 from ros_mongo.errors import SpoolError
 from ros_mongo.records import MessageRecord, TopicInfo
 
-__all__ = ["Spool"]
+__all__ = ["Spool", "SpoolFull", "DEFAULT_MAX_BYTES", "DEFAULT_MIN_FREE_BYTES", "read_entries"]
+
+DEFAULT_MAX_BYTES = 4 << 30
+DEFAULT_MIN_FREE_BYTES = 1 << 30
 
 MAGIC = b"RMS1"
 _FRAME = struct.Struct("<4sIII")
 _EXCLUSIVE_NONBLOCKING = fcntl.LOCK_EX + fcntl.LOCK_NB  # (distinct bits; "|" trips vermin's 3.10 check)
 Entry = Union[TopicInfo, MessageRecord]
+
+
+class SpoolFull(SpoolError):
+    """An append would cross the spool's size limit or its minimum free disk space."""
 
 
 class Spool:
@@ -34,12 +46,20 @@ class Spool:
     Args:
         path: the spool file (its directory is created).
         fsync: also fsync after each append (survives power loss, not only a killed process).
+        max_bytes: the file's size limit (bytes not yet drained count; drained ones are freed
+            when the spool empties).
+        min_free_bytes: free space an append must leave on the file system.
     """
 
-    def __init__(self, path: Union[str, Path], *, fsync: bool = False):
+    def __init__(self, path: Union[str, Path], *, fsync: bool = False, max_bytes: int = DEFAULT_MAX_BYTES,
+                 min_free_bytes: int = DEFAULT_MIN_FREE_BYTES):
+        if max_bytes < 1 or min_free_bytes < 0:
+            raise ValueError(f"spool max_bytes must be positive and min_free_bytes not negative, got "
+                             f"{max_bytes!r} and {min_free_bytes!r}")
         self.path = Path(path)
         self.offset_path = Path(str(self.path) + ".offset")
         self.fsync = fsync
+        self.max_bytes, self.min_free_bytes = int(max_bytes), int(min_free_bytes)
         self._lock = threading.Lock()
         self._file = None
         self._end = 0
@@ -85,6 +105,16 @@ class Spool:
             records += isinstance(entry, MessageRecord)
         data = b"".join(frames)
         with self._lock:
+            if self._end + len(data) > self.max_bytes:
+                raise SpoolFull(f"spool {self.path} is full: {self._end + len(data)} bytes would exceed "
+                                f"its limit of {self.max_bytes}")
+            try:
+                stats = os.statvfs(self.path.parent)
+            except OSError as err:
+                raise SpoolError(f"cannot check the free space for spool {self.path}: {err}") from err
+            if stats.f_bavail * stats.f_frsize - len(data) < self.min_free_bytes:
+                raise SpoolFull(f"spool {self.path}: appending {len(data)} bytes would leave less than "
+                                f"the minimum free space of {self.min_free_bytes} bytes")
             try:
                 self._file.seek(0, os.SEEK_END)
                 self._file.write(data)
@@ -156,6 +186,28 @@ class Spool:
                 offset += length
                 records += isinstance(entry, MessageRecord)
         return offset, records
+
+
+def read_entries(path: Union[str, Path]) -> List[Entry]:
+    """Every entry of a spool-format file (spool or quarantine), from its beginning, without
+    locking it; a torn last frame ends the list, a corrupt one in the middle raises SpoolError."""
+    entries: List[Entry] = []
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        with open(path, "rb") as reader:
+            offset = 0
+            while offset < size:
+                entry, length = _read_frame(reader)
+                if entry is None:
+                    if reader.tell() < size:
+                        raise SpoolError(f"{path} is corrupt at byte {offset}")
+                    break
+                entries.append(entry)
+                offset += length
+    except OSError as err:
+        raise SpoolError(f"cannot read {path}: {err}") from err
+    return entries
 
 
 def _frame(entry: Entry) -> bytes:

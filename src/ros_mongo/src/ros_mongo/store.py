@@ -5,24 +5,35 @@
 
 The store API is `ros_mongo.backends.base.MessageStore`; the backends register themselves for
 their URL schemes when `ros_mongo.backends` is imported (as here).
+
+Credentials: keep the URL password-free and give the password through `credentials_file` or the
+environment (ROS_MONGO_DB_PASSWORD, ROS_MONGO_DB_USER; see `ros_mongo.urls`). Errors and logs only
+ever show the redacted URL.
 """
 import logging
+from typing import Optional
 
 from ros_mongo.backends import BLOB_THRESHOLD, MessageStore, backend_for_url, redact_url
+from ros_mongo.urls import check_url, with_credentials
 
 __all__ = ["MessageStore", "open_store", "redact_url", "BLOB_THRESHOLD"]
 
 log = logging.getLogger(__name__)
 
 
-def open_store(url: str, *, connect: bool = True, **options) -> MessageStore:
+def open_store(url: str, *, connect: bool = True, credentials_file: Optional[str] = None,
+               **options) -> MessageStore:
     """A store for `url`: http(s):// is CouchDB, mongodb:// (or mongodb+srv://) is MongoDB.
 
     Args:
         connect: create the database and indexes now (StoreUnavailable if the server is down);
             with False the first operation does it (the recorder starts while the server is down).
+        credentials_file: a file holding 'user:password' or 'password' (see ros_mongo.urls);
+            without it the password may come from ROS_MONGO_DB_PASSWORD.
         options: blob_threshold, max_array_len, timeout (seconds).
     """
+    check_url(url)
+    url = with_credentials(url, credentials_file=credentials_file)
     store = backend_for_url(url)(url, **options)
     store._reopen_args = (url, dict(options))
     if connect:

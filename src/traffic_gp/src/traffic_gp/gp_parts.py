@@ -1,5 +1,6 @@
-"""GPflow pieces of the crowd model: the Poisson likelihood with exposure, the space-time kernel,
-the SVGP itself, its training step and its parameters as plain arrays.
+"""GPflow pieces of the crowd model: the count likelihoods with exposure (Poisson, and negative
+binomial for overdispersed counts), the space-time kernel, the SVGP itself, its training step and
+its parameters as plain arrays.
 
 Importing this module is cheap: TensorFlow and GPflow are imported (through `traffic_gp._tf`) by
 the first function called here, so the estimator can import it at the top while a process that
@@ -14,7 +15,9 @@ from traffic_gp.errors import ModelFormatError
 
 FLOAT = np.float64
 GAUSS_HERMITE = np.polynomial.hermite.hermgauss(20)
-_LIKELIHOOD = []      # the PoissonExposure class, made once TensorFlow is imported
+_LIKELIHOOD = {}      # likelihood classes by name, made once TensorFlow is imported
+LIKELIHOODS = ("negbin", "poisson")
+INITIAL_DISPERSION = 10.0
 
 
 def library_versions() -> str:
@@ -25,9 +28,80 @@ def library_versions() -> str:
 def poisson_exposure():
     """A new PoissonExposure likelihood (the class is built on first use: it derives from GPflow's
     Likelihood)."""
-    if not _LIKELIHOOD:
-        _LIKELIHOOD.append(_poisson_exposure_class(libs()))
-    return _LIKELIHOOD[0]()
+    if "poisson" not in _LIKELIHOOD:
+        _LIKELIHOOD["poisson"] = _poisson_exposure_class(libs())
+    return _LIKELIHOOD["poisson"]()
+
+
+def negbin_exposure(dispersion: float = INITIAL_DISPERSION):
+    """A new NegBinExposure likelihood with a trainable dispersion (built on first use)."""
+    if "negbin" not in _LIKELIHOOD:
+        _LIKELIHOOD["negbin"] = _negbin_exposure_class(libs())
+    return _LIKELIHOOD["negbin"](dispersion)
+
+
+def make_likelihood(name: str):
+    if name == "poisson":
+        return poisson_exposure()
+    if name == "negbin":
+        return negbin_exposure()
+    raise ModelFormatError(f"unknown likelihood {name!r}; known: {', '.join(LIKELIHOODS)}")
+
+
+def dispersion(model):
+    """The fitted negative-binomial dispersion r (Var = mu + mu^2 / r), or None for Poisson."""
+    value = getattr(model.likelihood, "dispersion", None)
+    return None if value is None else float(value.numpy())
+
+
+def _negbin_exposure_class(lib):
+    tf, gpflow = lib.tf, lib.gpflow
+
+    class NegBinExposure(gpflow.likelihoods.Likelihood):
+        """Overdispersed counts with exposure: Y = [count, exposure]; count ~ NB(mean mu, r) with
+        mu = exposure * exp(f) and Var = mu + mu^2 / r (a Poisson whose rate has a Gamma(r, r)
+        factor per row: crowds come in groups, days differ). r is trained with the
+        hyperparameters; r -> infinity is the Poisson likelihood. The expectations over
+        f ~ N(Fmu, Fvar) are by Gauss-Hermite quadrature."""
+
+        def __init__(self, dispersion: float):
+            super().__init__(input_dim=None, latent_dim=1, observation_dim=2)
+            self.dispersion = gpflow.Parameter(dispersion, transform=gpflow.utilities.positive(),
+                                               dtype=FLOAT, name="dispersion")
+
+        def _log_pmf(self, count, log_mu):
+            r = self.dispersion
+            log_r = tf.math.log(r)
+            log_total = tf.math.reduce_logsumexp(tf.stack([log_mu, log_r * tf.ones_like(log_mu)]),
+                                                 axis=0)
+            return (tf.math.lgamma(count + r) - tf.math.lgamma(r) - tf.math.lgamma(count + 1.0)
+                    + r * (log_r - log_total) + count * (log_mu - log_total))
+
+        def _log_prob(self, X, F, Y):
+            count, expo = Y[..., :1], Y[..., 1:]
+            return tf.reduce_sum(self._log_pmf(count, tf.math.log(expo) + F), -1)
+
+        def _quadrature(self, Fmu, Fvar, Y):
+            nodes, weights = GAUSS_HERMITE
+            count, expo = Y[..., :1], Y[..., 1:]
+            f = Fmu + tf.sqrt(2.0 * Fvar) * nodes                       # [..., n_nodes]
+            return self._log_pmf(count, tf.math.log(expo) + f), np.log(weights / np.sqrt(np.pi))
+
+        def _variational_expectations(self, X, Fmu, Fvar, Y):
+            log_p, log_w = self._quadrature(Fmu, Fvar, Y)
+            return tf.reduce_sum(log_p * np.exp(log_w), axis=-1)
+
+        def _predict_mean_and_var(self, X, Fmu, Fvar):
+            # per unit exposure, as PoissonExposure does
+            mean = tf.exp(Fmu + Fvar / 2.0)
+            second = tf.exp(2.0 * Fmu + 2.0 * Fvar)
+            return mean, mean + second * (1.0 + 1.0 / self.dispersion) - tf.square(mean)
+
+        def _predict_log_density(self, X, Fmu, Fvar, Y):
+            log_p, log_w = self._quadrature(Fmu, Fvar, Y)
+            return tf.reduce_logsumexp(log_p + log_w, axis=-1)
+
+    return NegBinExposure
 
 
 def _poisson_exposure_class(lib):
@@ -104,12 +178,13 @@ def build_kernel(*, spatial_lengthscale: float, hourly: bool, weekly: bool):
 
 
 def build_model(inducing: np.ndarray, *, spatial_lengthscale: float, hourly: bool, weekly: bool,
-                log_mean: float, num_data: int, train_inducing: bool):
-    """The whitened SVGP with the PoissonExposure likelihood and a constant mean `log_mean`."""
+                log_mean: float, num_data: int, train_inducing: bool, likelihood: str = "poisson"):
+    """The whitened SVGP with the `likelihood` ("poisson" or "negbin", both with exposure) and a
+    constant mean `log_mean`."""
     lib = libs()
     tf, gpflow = lib.tf, lib.gpflow
     kernel = build_kernel(spatial_lengthscale=spatial_lengthscale, hourly=hourly, weekly=weekly)
-    model = gpflow.models.SVGP(kernel, poisson_exposure(),
+    model = gpflow.models.SVGP(kernel, make_likelihood(likelihood),
                                gpflow.inducing_variables.InducingPoints(inducing.astype(FLOAT)),
                                mean_function=gpflow.mean_functions.Constant(np.array([log_mean])),
                                num_latent_gps=1, whiten=True)
@@ -138,6 +213,8 @@ class Trainer:
         self.step = tf.function(self._step if single_pass else self._two_pass_step,
                                 input_signature=spec)
         self.elbo = tf.function(lambda X, Y: model.elbo((X, Y)), input_signature=spec)
+        self.log_density = tf.function(lambda X, Y: model.predict_log_density((X, Y)),
+                                       input_signature=spec)
 
     def _step(self, X, Y):
         model = self.model

@@ -1,12 +1,21 @@
 """TrafficGP: where and when people are, learnt from counts with a sparse variational GP.
 
 The latent f(x, y, t) is the log people density (per m^2) over the map and the time of day (or of
-the week, `weekly=True`); counts are Poisson(exposure * exp(f)) (`gp_parts.poisson_exposure`).
-Kernel: space x daily cycle, plus (`hourly=True`) space x hourly cycle x daily envelope for the
-rush before the hour, plus (`weekly=True`) space x weekly cycle. Training: minibatches, natural
-gradients for q(u) and Adam for the hyperparameters, both step sizes lowered tenfold over the
-last 40 % of a `fit`; `partial_fit` continues from the current state (warm start) with the new
-rows added to the data. TensorFlow is imported on first use (by `gp_parts`).
+the week, `weekly=True`); counts are negative binomial with mean exposure * exp(f) and a trained
+dispersion r (`likelihood="negbin"`, the default: real counts are overdispersed) or
+Poisson(exposure * exp(f)) (`likelihood="poisson"`). Kernel: space x daily cycle, plus
+(`hourly=True`) space x hourly cycle x daily envelope for the rush before the hour, plus
+(`weekly=True`) space x weekly cycle. Training: minibatches, natural gradients for q(u) and Adam
+for the hyperparameters, both step sizes lowered tenfold over the last 40 % of a `fit`.
+
+`fit` holds out `validation_fraction` of the rows (at random, seeded): every `eval_every` steps
+it records the ELBO on a fixed sample of training rows (`elbo_`, at `eval_steps_`) and the mean
+negative log predictive density of the held-out rows (`validation_loss_`); it stops once the
+validation loss has not improved for `patience` evaluations after the warm-up and returns the
+parameters of the best evaluation (`best_step_`; of evaluations within 0.1 % of the best loss,
+the latest, the most converged one): `n_steps` is a maximum, not a fixed cost.
+`partial_fit` continues from the current state (warm start) with the new rows added to the data
+(all rows, no hold-out, no early stopping). TensorFlow is imported on first use (by `gp_parts`).
 
 The estimator owns its persistence: `save` writes its parameters, fitted state and (optionally)
 training rows through the file format of `persistence`; the `load` classmethod rebuilds a fitted
@@ -30,8 +39,13 @@ log = logging.getLogger(__name__)
 
 PARAMS = ("n_inducing", "spatial_lengthscale", "hourly", "weekly", "batch_size", "n_steps",
           "online_steps", "learning_rate", "natgrad_gamma", "train_inducing", "max_rows",
-          "time_bin_minutes", "random_state")
+          "time_bin_minutes", "random_state", "likelihood", "validation_fraction", "eval_every",
+          "patience")
 WARMUP_STEPS = 100
+ADAM_WARMUP_STEPS = 50      # a new optimiser's (after fit or load) step size ramps up over these
+EVAL_ROWS = 20000           # rows of the fixed ELBO sample and at most of the validation set
+TIE_SHARE = 1e-3            # validation losses this close to the best count as ties
+MIN_VALIDATION_ROWS = 50    # fewer held-out rows than this: no hold-out, no early stopping
 ANNEAL_SHARE = 0.4
 
 
@@ -49,7 +63,11 @@ class TrafficGP(LatentPredictions):
         train_inducing: also move the inducing points.
         max_rows: above this many stored rows, rows are merged per place and time bin of
             `time_bin_minutes` (`Observations.compress`, exact for Poisson counts).
-        random_state: seeds the inducing-point choice and the minibatches.
+        random_state: seeds the inducing-point choice, the hold-out and the minibatches.
+        likelihood: "negbin" (overdispersed counts, trained dispersion) or "poisson".
+        validation_fraction: share of the rows `fit` holds out for early stopping (0: none).
+        eval_every: steps between evaluations (ELBO on a fixed sample, validation loss).
+        patience: evaluations without a better validation loss before `fit` stops.
         progress: show a tqdm bar while training.
     """
 
@@ -58,13 +76,17 @@ class TrafficGP(LatentPredictions):
                  n_steps: int = 1500, online_steps: int = 100, learning_rate: float = 0.02,
                  natgrad_gamma: float = 0.03, train_inducing: bool = True,
                  max_rows: int = 2_000_000, time_bin_minutes: float = 2.0,
-                 random_state: Optional[int] = 0, progress: bool = False):
+                 random_state: Optional[int] = 0, likelihood: str = "negbin",
+                 validation_fraction: float = 0.1, eval_every: int = 50, patience: int = 6,
+                 progress: bool = False):
         self.n_inducing, self.spatial_lengthscale = n_inducing, spatial_lengthscale
         self.hourly, self.weekly = hourly, weekly
         self.batch_size, self.n_steps, self.online_steps = batch_size, n_steps, online_steps
         self.learning_rate, self.natgrad_gamma = learning_rate, natgrad_gamma
         self.train_inducing, self.max_rows = train_inducing, max_rows
         self.time_bin_minutes, self.random_state = time_bin_minutes, random_state
+        self.likelihood, self.validation_fraction = likelihood, validation_fraction
+        self.eval_every, self.patience = eval_every, patience
         self.progress = progress
 
     def get_params(self) -> dict:
@@ -82,28 +104,45 @@ class TrafficGP(LatentPredictions):
                   "learning_rate": self.learning_rate > 0,
                   "natgrad_gamma": 0 < self.natgrad_gamma <= 1,
                   "max_rows": self.max_rows >= self.batch_size,
-                  "time_bin_minutes": self.time_bin_minutes > 0}
+                  "time_bin_minutes": self.time_bin_minutes > 0,
+                  "likelihood": self.likelihood in gp_parts.LIKELIHOODS,
+                  "validation_fraction": 0 <= self.validation_fraction < 1,
+                  "eval_every": self.eval_every >= 1, "patience": self.patience >= 1}
         bad = [f"{name}={getattr(self, name)!r}" for name, ok in checks.items() if not ok]
         if bad:
             raise ConfigError(f"bad TrafficGP parameters: {', '.join(bad)}")
 
     # ---- training -------------------------------------------------------------------------
     def fit(self, obs: Observations, n_steps: Optional[int] = None) -> "TrafficGP":
-        """Start afresh on `obs` and train `n_steps` (default `self.n_steps`) steps."""
+        """Start afresh on `obs` and train at most `n_steps` (default `self.n_steps`) steps,
+        stopping early on the held-out rows (see the module docstring)."""
         self._check_params()
         if len(obs) == 0:
             raise NotFittedError("cannot fit on zero observations")
         self._rng = np.random.default_rng(self.random_state)
         self.data_ = obs
-        inputs = obs.inputs(self.period)
-        rate = max(obs.count.sum(), 0.5) / obs.exposure.sum()
+        order = self._rng.permutation(len(obs))
+        n_val = int(round(self.validation_fraction * len(obs)))
+        if n_val < MIN_VALIDATION_ROWS:
+            n_val = 0
+        self._validation_rows = np.sort(order[:min(n_val, EVAL_ROWS)])
+        self._train_rows = np.sort(order[n_val:])
+        fit_part = obs.subset(self._train_rows)
+        inputs = fit_part.inputs(self.period)
+        rate = max(fit_part.count.sum(), 0.5) / fit_part.exposure.sum()
         self.model_ = gp_parts.build_model(
             self._initial_inducing(inputs), spatial_lengthscale=self.spatial_lengthscale,
             hourly=self.hourly, weekly=self.weekly, log_mean=float(np.log(rate)),
-            num_data=len(obs), train_inducing=self.train_inducing)
-        self.n_steps_, self.elbo_, self.train_seconds_, self.compile_seconds_ = 0, [], 0.0, 0.0
+            num_data=len(fit_part), train_inducing=self.train_inducing,
+            likelihood=self.likelihood)
+        self.n_steps_, self.train_seconds_, self.compile_seconds_ = 0, 0.0, 0.0
+        self.elbo_, self.eval_steps_, self.validation_loss_ = [], [], []
+        self.best_step_, self.stopped_early_ = None, False
         self._trainer = None
-        return self._train(self.n_steps if n_steps is None else n_steps, anneal=True)
+        self._train(self.n_steps if n_steps is None else n_steps, anneal=True,
+                    early_stopping=len(self._validation_rows) > 0)
+        self._train_rows = None            # partial_fit trains on every row
+        return self
 
     def partial_fit(self, obs: Observations, n_steps: Optional[int] = None) -> "TrafficGP":
         """Add `obs` to the data and continue training from the current state (warm start)."""
@@ -114,7 +153,7 @@ class TrafficGP(LatentPredictions):
             if len(data) > self.max_rows:
                 data = data.compress(self.time_bin_minutes / 60.0, self.period)
             self.data_ = data
-            self.model_.num_data.assign(float(len(data)))
+        self.model_.num_data.assign(float(len(self.data_)))
         return self._train(self.online_steps if n_steps is None else n_steps)
 
     def _initial_inducing(self, inputs: np.ndarray) -> np.ndarray:
@@ -124,14 +163,23 @@ class TrafficGP(LatentPredictions):
                               f"(place, time) rows; got {unique.shape[0]}")
         return unique[self._rng.choice(unique.shape[0], self.n_inducing, replace=False)]
 
-    def _train(self, n_steps: int, anneal: bool = False) -> "TrafficGP":
+    def _train(self, n_steps: int, anneal: bool = False,
+               early_stopping: bool = False) -> "TrafficGP":
         if self._trainer is None:
             self._trainer = gp_parts.Trainer(self.model_, learning_rate=self.learning_rate,
                                              gamma=self.natgrad_gamma)
-            self._trainer_used = False
-        inputs = self.data_.inputs(self.period)
-        targets = np.column_stack([self.data_.count, self.data_.exposure])
-        size = min(self.batch_size, len(self.data_))
+            self._trainer_used, self._trainer_steps = False, 0
+        rows = getattr(self, "_train_rows", None)
+        data = self.data_ if rows is None else self.data_.subset(rows)
+        inputs = data.inputs(self.period)
+        targets = np.column_stack([data.count, data.exposure])
+        eval_rows = np.random.default_rng(self.random_state).permutation(len(data))[:EVAL_ROWS]
+        eval_inputs, eval_targets = inputs[eval_rows], targets[eval_rows]
+        if early_stopping:
+            held_out = self.data_.subset(self._validation_rows)
+            val_inputs = held_out.inputs(self.period)
+            val_targets = np.column_stack([held_out.count, held_out.exposure])
+        size = min(self.batch_size, len(data))
         steps = range(n_steps)
         if self.progress and n_steps:
             steps = tqdm(steps, desc="training crowd GP", unit="step", mininterval=1.0)
@@ -139,16 +187,39 @@ class TrafficGP(LatentPredictions):
         fresh = not self._trainer_used
         if fresh and n_steps:     # tracing the compiled functions takes seconds: timed apart
             self._trainer.elbo(inputs[:2], targets[:2])
+        best, best_loss, done, improved_at = None, np.inf, 0, 0
         for step in steps:
             self._set_rates(self.n_steps_ + step, step / max(n_steps, 1) if anneal else 0.0)
-            rows = self._rng.integers(0, len(self.data_), size)
-            self._trainer.step(inputs[rows], targets[rows])
+            batch = self._rng.integers(0, len(data), size)
+            self._trainer.step(inputs[batch], targets[batch])
+            self._trainer_steps += 1
+            done = step + 1
             if fresh:
                 self.compile_seconds_ += time.perf_counter() - start
                 self._trainer_used, fresh = True, False
-            if (step + 1) % 100 == 0 or step == n_steps - 1:
-                self.elbo_.append(float(self._trainer.elbo(inputs[rows], targets[rows])))
-        self.n_steps_ += n_steps
+            if done % self.eval_every and step != n_steps - 1:
+                continue
+            self.eval_steps_.append(self.n_steps_ + done)
+            self.elbo_.append(float(self._trainer.elbo(eval_inputs, eval_targets))
+                              * len(data) / len(eval_rows))
+            if not early_stopping:
+                continue
+            loss = -float(np.mean(self._trainer.log_density(val_inputs, val_targets)))
+            self.validation_loss_.append(loss)
+            if loss < best_loss:
+                best_loss, improved_at = loss, self.n_steps_ + done
+            if loss <= best_loss + TIE_SHARE * abs(best_loss):    # ties: the later state
+                best = gp_parts.parameter_values(self.model_)
+                self.best_step_ = self.n_steps_ + done
+            elif (self.n_steps_ + done > WARMUP_STEPS
+                  and self.n_steps_ + done - improved_at >= self.patience * self.eval_every):
+                self.stopped_early_ = True
+                break
+        if hasattr(steps, "close"):
+            steps.close()
+        self.n_steps_ += done
+        if best is not None:
+            gp_parts.assign_parameter_values(self.model_, best)
         self.train_seconds_ += time.perf_counter() - start
         if self.elbo_ and not np.isfinite(self.elbo_[-1]):
             log.warning("the ELBO is not finite after %d steps: lower learning_rate or "
@@ -156,18 +227,28 @@ class TrafficGP(LatentPredictions):
         return self
 
     def _set_rates(self, done: int, progress: float) -> None:
-        """Natural-gradient steps grow 100x over the first WARMUP_STEPS; in the last
-        ANNEAL_SHARE of a fit both step sizes shrink 10x (less minibatch jitter at the end)."""
+        """Natural-gradient steps grow 100x over the first WARMUP_STEPS of training; both step
+        sizes also grow linearly over the first ADAM_WARMUP_STEPS of a new optimiser (after
+        `load`: a fresh Adam's first steps have the full step size in every direction whatever
+        the gradient, and full natural-gradient steps on a minibatch would shake the model);
+        in the last ANNEAL_SHARE of a fit both step sizes shrink 10x (less minibatch jitter)."""
         warm = 10.0 ** (-2.0 * (1.0 - done / WARMUP_STEPS)) if done < WARMUP_STEPS else 1.0
+        adam_warm = min(1.0, (self._trainer_steps + 1) / ADAM_WARMUP_STEPS)
+        warm = min(warm, adam_warm)         # a loaded model's first natural-gradient steps too
         anneal = 1.0
         if progress > 1.0 - ANNEAL_SHARE:
             anneal = 10.0 ** (-(progress - 1.0 + ANNEAL_SHARE) / ANNEAL_SHARE)
         self._trainer.gamma.assign(self.natgrad_gamma * warm * anneal)
-        self._trainer.adam.learning_rate.assign(self.learning_rate * anneal)
+        self._trainer.adam.learning_rate.assign(self.learning_rate * anneal * adam_warm)
 
     # ---- prediction (the rest of the predictions: posterior.LatentPredictions) -------------
     def _fitted(self) -> bool:
         return hasattr(self, "model_")
+
+    @property
+    def dispersion_(self) -> Optional[float]:
+        """The negative binomial's fitted dispersion r, or None for the Poisson likelihood."""
+        return gp_parts.dispersion(self.model_)
 
     @property
     def n_rows_(self) -> int:
@@ -190,6 +271,7 @@ class TrafficGP(LatentPredictions):
         header = {"params": self.get_params(), "n_steps": self.n_steps_,
                   "n_rows": len(self.data_), "elbo": self.elbo_[-1] if self.elbo_ else None,
                   "train_seconds": self.train_seconds_,
+                  "best_step": getattr(self, "best_step_", None),
                   "libraries": gp_parts.library_versions(), "meta": meta or {}}
         return write_model_file(path, header, gp_parts.parameter_values(self.model_),
                                 self.data_ if include_data else None)
@@ -199,7 +281,8 @@ class TrafficGP(LatentPredictions):
         """A fitted `TrafficGP` with the parameters saved in `path`; nothing is trained."""
         header, values, data = read_parameters(path, with_data=True)
         try:
-            estimator = cls(**header["params"])
+            # files written before the likelihood was a parameter hold Poisson models
+            estimator = cls(**dict({"likelihood": "poisson"}, **header["params"]))
             inducing = values[".inducing_variable.Z"]
         except (TypeError, KeyError) as err:
             raise ModelFormatError(f"{path}: the saved model lacks {err}") from err
@@ -213,11 +296,14 @@ class TrafficGP(LatentPredictions):
         self.model_ = gp_parts.build_model(
             inducing, spatial_lengthscale=self.spatial_lengthscale, hourly=self.hourly,
             weekly=self.weekly, log_mean=0.0, num_data=header["n_rows"],
-            train_inducing=self.train_inducing)
+            train_inducing=self.train_inducing, likelihood=self.likelihood)
         gp_parts.assign_parameter_values(self.model_, values)
         self.data_ = data if data is not None else Observations.empty()
         self.n_steps_, self.train_seconds_ = header["n_steps"], header["train_seconds"]
         self.compile_seconds_ = 0.0
         self.elbo_ = [header["elbo"]] if header["elbo"] is not None else []
+        self.eval_steps_ = [self.n_steps_] if self.elbo_ else []
+        self.validation_loss_, self.best_step_ = [], header.get("best_step")
+        self.stopped_early_, self._train_rows = False, None
         self.meta_ = header["meta"]
         self._trainer = None

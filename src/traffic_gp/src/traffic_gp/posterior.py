@@ -4,8 +4,10 @@ Importing TensorFlow and GPflow takes several seconds, and a node that loads a s
 answer queries needs neither. `PosteriorSnapshot.load(path)` reads the parameters a `TrafficGP`
 saved (`persistence.read_parameters`), maps them to their constrained values as GPflow does
 (softplus for the positive ones, TensorFlow Probability's fill_triangular for q_sqrt) and
-predicts the latent log density as the whitened SVGP's `predict_f` does. `LatentPredictions`
-holds the predictions both `TrafficGP` and the snapshot derive from the latent Gaussian.
+predicts the latent log density as the whitened SVGP's `predict_f` does; a negative-binomial
+model's dispersion (`.likelihood.dispersion`, softplus) comes along, so count intervals and
+log-likelihoods are those of the saved likelihood. `LatentPredictions` holds the predictions both
+`TrafficGP` and the snapshot derive from the latent Gaussian.
 """
 import re
 from typing import Dict, List, Tuple
@@ -23,7 +25,8 @@ CHUNK = 20000          # prediction rows per block (memory stays small)
 
 class LatentPredictions:
     """Predictions from the Gaussian over the log density f(x, y, t); subclasses provide
-    `_latent(inputs, full_cov)`, `_fitted()`, `period` and `random_state`."""
+    `_latent(inputs, full_cov)`, `_fitted()`, `period`, `random_state` and `dispersion_`
+    (None for Poisson counts, r of the negative binomial otherwise)."""
 
     def _inputs(self, x, y, t) -> np.ndarray:
         if not self._fitted():
@@ -48,9 +51,9 @@ class LatentPredictions:
         return np.asarray(exposure) * predictive.expected_std(mean, var)
 
     def predict_interval(self, x, y, t, exposure=1.0, level: float = 0.9):
-        """Central `level` predictive interval of the count itself (model + Poisson noise)."""
+        """Central `level` predictive interval of the count itself (model + count noise)."""
         mean, var = self.predict_latent(x, y, t)
-        return predictive.interval(level, mean, var, exposure)
+        return predictive.interval(level, mean, var, exposure, self.dispersion_)
 
     def sample_totals(self, x, y, t, exposure, n_samples: int = 500) -> np.ndarray:
         """Samples of the summed expected count over many cells at one time (joint posterior)."""
@@ -63,7 +66,8 @@ class LatentPredictions:
     def score(self, obs) -> float:
         """Mean held-out log predictive density of the counts (higher is better)."""
         mean, var = self.predict_latent(obs.x, obs.y, obs.t)
-        return float(np.mean(predictive.log_density(obs.count, mean, var, obs.exposure)))
+        return float(np.mean(predictive.log_density(obs.count, mean, var, obs.exposure,
+                                                    self.dispersion_)))
 
 
 def softplus(x: np.ndarray) -> np.ndarray:
@@ -115,6 +119,10 @@ class PosteriorSnapshot(LatentPredictions):
             self.inducing = np.asarray(values[".inducing_variable.Z"], float)
             q_mu = np.asarray(values[".q_mu"], float)[:, 0]
             q_sqrt = fill_triangular(np.asarray(values[".q_sqrt"], float))[0]
+            self.dispersion_ = None
+            if params.get("likelihood", "poisson") == "negbin":
+                self.dispersion_ = float(softplus(np.asarray(values[".likelihood.dispersion"],
+                                                             float)))
         except (KeyError, IndexError, ValueError) as err:
             raise ModelFormatError(f"{path or 'model'}: unexpected saved parameters ({err})") from err
         kuu = self._kernel(self.inducing, self.inducing) + JITTER * np.eye(len(self.inducing))

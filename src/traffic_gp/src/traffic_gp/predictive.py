@@ -1,9 +1,13 @@
 """Predictive distributions of people counts, in NumPy (no TensorFlow).
 
 The model gives a Gaussian over the log density f at each place and time; a count watched with
-exposure e is then Poisson(e * exp(f)) mixed over f. Everything here integrates f out by
-Gauss-Hermite quadrature. A point forecast (a baseline's rate) is the case var = 0.
+exposure e is then Poisson(e * exp(f)) (`dispersion=None`) or negative binomial with mean
+mu = e * exp(f) and variance mu + mu^2 / r (`dispersion=r`, overdispersed counts), mixed over f.
+Everything here integrates f out by Gauss-Hermite quadrature. A point forecast (a baseline's
+rate) is the case var = 0.
 """
+from typing import Optional
+
 import numpy as np
 from scipy import special, stats
 
@@ -30,23 +34,42 @@ def _rates(mean, var, expo):
     return expo[..., None] * np.exp(f)
 
 
-def log_density(count, mean, var, expo):
+def _component_cdf(k, rates, dispersion: Optional[float]):
+    if dispersion is None:
+        return stats.poisson.cdf(k, rates)
+    return stats.nbinom.cdf(k, dispersion, dispersion / (dispersion + rates))
+
+
+def _component_ppf(q, rates, dispersion: Optional[float]):
+    if dispersion is None:
+        return stats.poisson.ppf(q, rates)
+    return stats.nbinom.ppf(q, dispersion, dispersion / (dispersion + rates))
+
+
+def log_density(count, mean, var, expo, dispersion: Optional[float] = None):
     """log p(count) of the mixture, per row (held-out log-likelihood)."""
-    rates = _rates(mean, var, expo)
+    rates = np.maximum(_rates(mean, var, expo), 1e-300)
     count = np.asarray(count, float)[..., None]
-    log_p = count * np.log(np.maximum(rates, 1e-300)) - rates - special.gammaln(count + 1.0)
+    if dispersion is None:
+        log_p = count * np.log(rates) - rates - special.gammaln(count + 1.0)
+    else:
+        r = float(dispersion)
+        log_total = np.logaddexp(np.log(rates), np.log(r))
+        log_p = (special.gammaln(count + r) - special.gammaln(r) - special.gammaln(count + 1.0)
+                 + r * (np.log(r) - log_total) + count * (np.log(rates) - log_total))
     return special.logsumexp(log_p + LOG_WEIGHTS, axis=-1)
 
 
-def cdf(count, mean, var, expo):
+def cdf(count, mean, var, expo, dispersion: Optional[float] = None):
     """P(N <= count) of the mixture, per row (count may be -1: gives 0)."""
     rates = _rates(mean, var, expo)
-    return np.sum(stats.poisson.cdf(np.asarray(count, float)[..., None], rates) * WEIGHTS, -1) \
-        / np.sqrt(np.pi)
+    return np.sum(_component_cdf(np.asarray(count, float)[..., None], rates, dispersion)
+                  * WEIGHTS, -1) / np.sqrt(np.pi)
 
 
-def quantile(q: float, mean, var, expo):
-    """Smallest count k with P(N <= k) >= q, per row."""
+def quantile(q: float, mean, var, expo, dispersion: Optional[float] = None):
+    """Smallest count k with P(N <= k) >= q, per row (bisection between the quadrature
+    components' own quantiles, which bracket the mixture's)."""
     mean, var, expo = np.broadcast_arrays(np.asarray(mean, float), np.asarray(var, float),
                                           np.asarray(expo, float))
     out = np.zeros(mean.shape)
@@ -55,41 +78,45 @@ def quantile(q: float, mean, var, expo):
     for start in range(0, flat_out.size, CHUNK):
         part = slice(start, start + CHUNK)
         rates = _rates(flat[0][part], flat[1][part], flat[2][part])
-        k = np.zeros(rates.shape[0])
-        todo = np.ones(rates.shape[0], bool)
-        while todo.any():
-            below = np.sum(stats.poisson.cdf(k[todo, None], rates[todo]) * WEIGHTS, -1) \
-                / np.sqrt(np.pi) < q - 1e-12
-            rows = np.nonzero(todo)[0]
-            k[rows[below]] += 1
-            todo[rows[~below]] = False
-        flat_out[part] = k
+        ppf = _component_ppf(q, rates, dispersion)
+        low = np.min(ppf, axis=1) - 1.0           # P(N <= low) < q
+        high = np.max(ppf, axis=1)                # P(N <= high) >= q
+        while np.any(high - low > 1):
+            mid = np.floor((low + high) / 2.0)
+            ok = np.sum(_component_cdf(mid[:, None], rates, dispersion) * WEIGHTS, -1) \
+                / np.sqrt(np.pi) >= q - 1e-12
+            high = np.where(ok, mid, high)
+            low = np.where(ok, low, mid)
+        flat_out[part] = np.maximum(high, 0.0)
     return out
 
 
-def interval(level: float, mean, var, expo):
+def interval(level: float, mean, var, expo, dispersion: Optional[float] = None):
     """Central predictive interval (lower, upper) of the count holding `level` of the mass."""
     tail = (1.0 - level) / 2.0
-    return quantile(tail, mean, var, expo), quantile(1.0 - tail, mean, var, expo)
+    return (quantile(tail, mean, var, expo, dispersion),
+            quantile(1.0 - tail, mean, var, expo, dispersion))
 
 
-def randomized_pit(count, mean, var, expo, rng: np.random.Generator):
+def randomized_pit(count, mean, var, expo, rng: np.random.Generator,
+                   dispersion: Optional[float] = None):
     """Randomised probability integral transform (Czado, Gneiting & Held 2009): uniform on (0, 1)
     for a calibrated forecast of discrete counts."""
     count = np.asarray(count, float)
-    lower = cdf(count - 1.0, mean, var, expo)
-    upper = cdf(count, mean, var, expo)
+    lower = cdf(count - 1.0, mean, var, expo, dispersion)
+    upper = cdf(count, mean, var, expo, dispersion)
     return lower + rng.random(count.shape) * (upper - lower)
 
 
-def coverage(count, mean, var, expo, level: float = 0.9, rng=None):
+def coverage(count, mean, var, expo, level: float = 0.9, rng=None,
+             dispersion: Optional[float] = None):
     """Share of counts inside the central `level` interval, two ways: `inside` counts a held-out
     count inside [lower, upper] (conservative for small counts: even the true distribution covers
     more than `level`), `pit` uses the randomised PIT (a calibrated forecast gives `level`)."""
     rng = rng if rng is not None else np.random.default_rng(0)
-    lower, upper = interval(level, mean, var, expo)
+    lower, upper = interval(level, mean, var, expo, dispersion)
     count = np.asarray(count, float)
-    pit = randomized_pit(count, mean, var, expo, rng)
+    pit = randomized_pit(count, mean, var, expo, rng, dispersion)
     tail = (1.0 - level) / 2.0
     return {"inside": float(np.mean((count >= lower) & (count <= upper))),
             "pit": float(np.mean((pit >= tail) & (pit <= 1.0 - tail)))}

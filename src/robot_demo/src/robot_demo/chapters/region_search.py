@@ -24,7 +24,19 @@ def run(demo) -> None:
     launch = demo.launch("region_search", "region_search.launch", labels_path=str(labels))
     launch.wait_for_services(["/embedding_server/embed", "/embedding_server/similarity",
                               "/region_recommender/recommend"], timeout=300)
-    probe = rospy.ServiceProxy("/embedding_server/embed", Embed)(phrases=["robot"])
+    # The services are advertised at once; the model is ready when ~active_backend is set (the
+    # word2vec fallback trains for minutes on a machine that never trained it: say so).
+    embed = rospy.ServiceProxy("/embedding_server/embed", Embed)
+    said = ""
+    while not rospy.has_param("/embedding_server/active_backend"):
+        if time.monotonic() - start > 3600:
+            raise RuntimeError("the embedding model was not ready after an hour")
+        probe = embed(phrases=["robot"])
+        if not probe.success and probe.message != said and time.monotonic() - start > 15:
+            said = probe.message
+            print(f"  {probe.message}")
+        rospy.sleep(5.0 if said else 0.2)
+    probe = embed(phrases=["robot"])
     print(f"  nodes ready in {time.monotonic() - start:.1f} s; backend {probe.backend}: "
           f"{probe.model}")
     if probe.backend_note:

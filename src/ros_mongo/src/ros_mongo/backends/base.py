@@ -3,40 +3,43 @@ and the registry that picks a backend from a database URL's scheme.
 
 A backend subclasses `MessageStore`, implements its primitives (`_setup`, `_batch_item`,
 `_write_batch`, `_put_topic_doc`, `_topic_docs`, `_docs`, `_count`, `_load_blob`, `ping`,
-`close`) and registers itself for its URL schemes with `register_backend`. Everything users call
-lives here; the stored document layout is in `ros_mongo.documents`. This module imports no
-backend: `ros_mongo.backends` imports each one, and each registers itself on import.
+`close`, and `ensure_indexes` where it has indexes) and registers itself for its URL schemes with
+`register_backend`. Everything users call lives here; the stored document layout is in
+`ros_mongo.documents`. This module imports no backend: `ros_mongo.backends` imports each one, and
+each registers itself on import.
+
+Write errors (taxonomy in ros_mongo.errors): `_write_batch` raises StoreUnavailable (retry later),
+StoreRefused (operator must act) or BatchTooLarge (refused as a whole because of one document:
+`_insert` splits the batch until that document is alone), and reports documents refused on their
+own merits as "<id>: <reason>" strings; `insert_records` stores every other document, then raises
+one DocumentsRejected naming the refused ids.
 """
 import abc
 import threading
 import time
 from io import BytesIO
 from typing import Callable, Dict, Iterator, List, Optional, Sequence, Tuple, Type, TypeVar, Union
-from urllib.parse import urlsplit, urlunsplit
 
 import ros_mongo.msgtypes as msgtypes
 from ros_mongo.documents import stored_message, topic_from_doc
-from ros_mongo.errors import QueryError, StoreError, UnknownTypeError
+from ros_mongo.errors import (
+    BatchTooLarge,
+    DocumentsRejected,
+    QueryError,
+    StoreError,
+    StoreRefused,
+    StoreUnavailable,
+    UnknownTypeError,
+)
 from ros_mongo.query import Query
 from ros_mongo.records import MessageRecord, StoredMessage, TopicInfo, make_record, split_time
+from ros_mongo.urls import check_url, redact_url
 
 __all__ = ["MessageStore", "BLOB_THRESHOLD", "redact_url", "register_backend", "backend_for_url",
            "registered_schemes"]
 
 #: Serialized messages larger than this go to attachments (CouchDB) or GridFS (MongoDB).
 BLOB_THRESHOLD = 256 * 1024
-
-
-def redact_url(url: str) -> str:
-    """`url` without its password (for logs and error messages)."""
-    parts = urlsplit(url)
-    if parts.password is None and "@" not in parts.netloc:
-        return url
-    host = parts.hostname or ""
-    if parts.port:
-        host = f"{host}:{parts.port}"
-    user = f"{parts.username}:***@" if parts.username else "***@"
-    return urlunsplit((parts.scheme, user + host, parts.path, parts.query, parts.fragment))
 
 
 class MessageStore(abc.ABC):
@@ -180,25 +183,59 @@ class MessageStore(abc.ABC):
     def _setup(self) -> None:
         """Create the database and its indexes if needed."""
 
+    def ensure_indexes(self) -> bool:
+        """Create the indexes / design documents reads use, if this account may (once; tolerant of
+        another client creating them at the same time). True when they exist afterwards, False when
+        the account may not create them (reads still work, slower). StoreUnavailable when the server
+        cannot be reached. Backends with indexes override this; `ros_mongo_bag setup` calls it with
+        an admin URL."""
+        return True
+
     def _insert(self, records: List[MessageRecord]) -> int:
-        """Write records in batches of at most `batch_docs` documents and about `batch_bytes`;
-        a batch's rejected documents are collected and reported together after the others."""
+        """Write records in batches of at most `batch_docs` documents and about `batch_bytes`.
+
+        A batch refused as a whole because of one document (BatchTooLarge) is split until that
+        document is alone; documents refused on their own merits are collected and reported
+        together, after every other document was stored, as one DocumentsRejected naming them.
+        StoreUnavailable / StoreRefused pass through (nothing is lost: ids dedupe the retry)."""
         stored, errors, batch, size = 0, [], [], 0
         for record in records:
-            item, weight = self._batch_item(record)
+            try:
+                item, weight = self._batch_item(record)
+            except (StoreUnavailable, StoreRefused):
+                raise
+            except StoreError as err:  # cannot be encoded at all: invalid on its own merits
+                errors.append(f"{record.id}: {err}")
+                continue
             if batch and (len(batch) >= self.batch_docs or size + weight > self.batch_bytes):
-                stored += self._write_batch(batch, errors)
+                stored += self._write_split(batch, errors)
                 batch, size = [], 0
-            batch.append(item)
+            batch.append((item, record.id))
             size += weight
         if batch:
-            stored += self._write_batch(batch, errors)
+            stored += self._write_split(batch, errors)
         if errors:
-            error = StoreError(f"{self.backend_title} rejected {len(errors)} of {len(records)} "
-                               f"documents, first: {errors[0]}")
-            error.rejected = len(errors)
-            raise error
+            ids = frozenset(e.split(":", 1)[0] for e in errors)
+            raise DocumentsRejected(f"{self.backend_title} rejected {len(errors)} of {len(records)} "
+                                    f"documents, first: {errors[0]}", len(errors), ids)
         return stored
+
+    def _write_split(self, batch: List[Tuple[object, str]], errors: list) -> int:
+        """`_write_batch`, splitting a batch refused as a whole around the document it names
+        (or in halves) until that document is alone; a lone refused document goes to `errors`."""
+        try:
+            return self._write_batch([item for item, _ in batch], errors)
+        except BatchTooLarge as err:
+            if len(batch) == 1:
+                errors.append(f"{batch[0][1]}: {err}")
+                return 0
+            ids = [doc_id for _, doc_id in batch]
+            if err.doc_id in ids:
+                at = ids.index(err.doc_id)
+                parts = [batch[:at], batch[at:at + 1], batch[at + 1:]]
+            else:
+                parts = [batch[:len(batch) // 2], batch[len(batch) // 2:]]
+            return sum(self._write_split(part, errors) for part in parts if part)
 
     @abc.abstractmethod
     def _batch_item(self, record: MessageRecord) -> Tuple[object, int]:
@@ -206,7 +243,9 @@ class MessageStore(abc.ABC):
 
     @abc.abstractmethod
     def _write_batch(self, batch: list, errors: list) -> int:
-        """Write one batch; append rejected documents' reasons to `errors`; return newly stored."""
+        """Write one batch; append "<id>: <reason>" of each document refused on its own merits to
+        `errors`; return how many were newly stored. Raises StoreUnavailable (retry later),
+        StoreRefused (operator must act) or BatchTooLarge (refused as a whole, see `_insert`)."""
 
     @abc.abstractmethod
     def _put_topic_doc(self, info: TopicInfo) -> None:
@@ -280,9 +319,7 @@ def registered_schemes() -> Dict[str, str]:
 
 def backend_for_url(url: str) -> Type[MessageStore]:
     """The backend class for `url`'s scheme (StoreError for a malformed URL or unknown scheme)."""
-    if not isinstance(url, str) or "://" not in url:
-        raise StoreError(f"database URL must look like http://host:5984/db or mongodb://host:27017/db, "
-                         f"got {url!r}")
+    check_url(url)
     scheme = url.split("://", 1)[0].lower()
     store_cls = _BACKENDS.get(scheme)
     if store_cls is None:

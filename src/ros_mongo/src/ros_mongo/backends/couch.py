@@ -6,12 +6,29 @@ inline as base64 (`raw`), larger ones as the attachment `raw` (so the document b
 CouchDB's 8,000,000-byte limit, which is also enforced here because pouchdb-server does not);
 one document per topic and type (`kind: "topic"`, id `topic-<hash>`). Mango indexes on
 (topic, receive_time) and (receive_time); reads page through `_find` sorted by receive time.
+
+Least privilege: recording needs only a database *member* account (document writes). Creating the
+database and the Mango indexes (design documents) is tried once, when the account may; otherwise
+it is skipped with one warning, and reads go through `_all_docs` id ranges (ids sort by receive
+time) with `_find` (no sort) doing the matching: the same answers, slower.
+
+URLs: `http(s)://[user:pass@]host[:port][/prefix...]/dbname`: the last path segment is the
+database (write a "/" inside a database name as %2F); anything before it is a reverse proxy's path
+prefix. TLS: `tls_ca_file` (a private CA bundle), `tls_cert_file` + `tls_key_file` (a client
+certificate), `tls_verify=False` only for testing.
+
+Answers (see ros_mongo.errors): connection errors, timeouts, a truncated or non-JSON body, 429,
+5xx (500 `timeout` included) -> StoreUnavailable; 401, 403, 500 `error_saving_ddoc` forbidden, a
+missing database the account may not create -> StoreRefused; 413 (`document_too_large` names the
+document) and 400 on `_bulk_docs` -> BatchTooLarge; 202 on `_bulk_docs` (no write quorum) ->
+the documents are looked up, and StoreUnavailable unless every one is there.
 """
 import base64
 import binascii
 import dataclasses
 import heapq
 import json
+import logging
 import time
 from typing import Dict, Iterator, List, Optional, Tuple
 from urllib.parse import quote, unquote, urlsplit, urlunsplit
@@ -20,15 +37,19 @@ import requests
 
 from ros_mongo.backends.base import MessageStore, register_backend
 from ros_mongo.documents import META_KEYS, message_doc, query_conditions, to_selector, topic_doc
-from ros_mongo.errors import QueryError, StoreError, StoreUnavailable
+from ros_mongo.errors import BatchTooLarge, QueryError, StoreError, StoreRefused, StoreUnavailable
 from ros_mongo.query import Query
 from ros_mongo.records import MessageRecord, TopicInfo
 
 __all__ = ["CouchStore", "MAX_DOC_BYTES"]
 
+log = logging.getLogger(__name__)
+
 MAX_DOC_BYTES = 8_000_000
 _INDEXES = {"ros_mongo_topic_time": ["topic", "receive_time"], "ros_mongo_time": ["receive_time"]}
 _DB_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789_$()+-/")
+_MIN_WINDOW = 1e-3   # seconds: the windowed reader's smallest time window
+_READ_RETRIES = 4    # a read answered "retry later" is tried this many times (backoff 0.5, 1, 2 s)
 
 
 @register_backend("http", "https")
@@ -38,17 +59,21 @@ class CouchStore(MessageStore):
     backend = "couchdb"
     backend_title = "CouchDB"
 
-    def __init__(self, url: str, *, timeout: float = 30.0, page_size: int = 200, **options):
+    def __init__(self, url: str, *, timeout: float = 30.0, page_size: int = 200,
+                 tls_ca_file: Optional[str] = None, tls_cert_file: Optional[str] = None,
+                 tls_key_file: Optional[str] = None, tls_verify: bool = True, **options):
         super().__init__(url, **options)
         parts = urlsplit(url)
-        self.db_name = unquote(parts.path.strip("/")) or "robot_data"
+        segments = parts.path.strip("/").split("/") if parts.path.strip("/") else []
+        self.db_name = unquote(segments[-1]) if segments else "robot_data"
         if self.db_name[0] not in "abcdefghijklmnopqrstuvwxyz" or not set(self.db_name) <= _DB_NAME_CHARS:
             raise StoreError(f"bad CouchDB database name {self.db_name!r}: lowercase letters, digits "
                              f"and _$()+-/ only, starting with a letter")
         netloc = parts.hostname or "localhost"
         if parts.port:
             netloc = f"{netloc}:{parts.port}"
-        self.server_url = urlunsplit((parts.scheme, netloc, "", "", ""))
+        prefix = "/".join(segments[:-1])
+        self.server_url = urlunsplit((parts.scheme, netloc, "/" + prefix if prefix else "", "", ""))
         self.db_url = f"{self.server_url}/{quote(self.db_name, safe='')}"
         self.timeout = float(timeout)
         self.page_size = int(page_size)
@@ -56,24 +81,69 @@ class CouchStore(MessageStore):
         self.session.headers.update({"Accept": "application/json"})
         if parts.username:
             self.session.auth = (unquote(parts.username), unquote(parts.password or ""))
+        if tls_ca_file:
+            self.session.verify = str(tls_ca_file)
+        elif not tls_verify:
+            self.session.verify = False
+        if tls_cert_file:
+            self.session.cert = ((str(tls_cert_file), str(tls_key_file)) if tls_key_file
+                                 else str(tls_cert_file))
+        self.indexed: Optional[bool] = None  # whether the Mango indexes exist (None: not known yet)
 
     # -- HTTP --------------------------------------------------------------------------------
     def _request(self, method: str, path: str, *, ok=(200, 201, 202), **kwargs) -> requests.Response:
+        """One request; any answer outside `ok` raises per the taxonomy in the module docstring."""
         url = self.db_url + path
         try:
-            response = self.session.request(method, url, timeout=self.timeout, **kwargs)
-        except (requests.ConnectionError, requests.Timeout) as err:
-            raise StoreUnavailable(f"CouchDB at {self.url} is unreachable: {type(err).__name__}") from err
+            # verify given per request: requests lets REQUESTS_CA_BUNDLE override the session's
+            response = self.session.request(method, url, timeout=self.timeout, verify=self.session.verify,
+                                            **kwargs)
+        except requests.exceptions.SSLError as err:  # (a ConnectionError subclass: first)
+            raise StoreRefused(f"TLS with CouchDB at {self.url} failed (check tls_ca_file / "
+                               f"tls_cert_file): {_ssl_reason(err)}") from err
+        except (requests.ConnectionError, requests.Timeout, requests.exceptions.ChunkedEncodingError,
+                requests.exceptions.ContentDecodingError) as err:
+            raise StoreUnavailable(f"CouchDB at {self.url} is unreachable or cut the answer short: "
+                                   f"{type(err).__name__}") from err
         except requests.RequestException as err:
-            raise StoreError(f"CouchDB request {method} {path or '/'} failed: {err}") from err
-        if response.status_code in ok:
+            raise StoreError(f"CouchDB request {method} {path or '/'} failed: {type(err).__name__}") from err
+        status = response.status_code
+        if status in ok:
             return response
-        reason = _reason(response)
-        if response.status_code in (502, 503, 504):
-            raise StoreUnavailable(f"CouchDB at {self.url} is unavailable ({response.status_code}: {reason})")
-        if response.status_code in (401, 403):
-            raise StoreError(f"CouchDB refused access to {self.url} ({response.status_code}: {reason})")
-        raise StoreError(f"CouchDB {method} {path or '/'} answered {response.status_code}: {reason}")
+        error, reason = _reason(response)
+        said = f"{status}: {error}: {reason}" if error else f"{status}: {reason}"
+        if status in (401, 403) or (error == "error_saving_ddoc" and "forbidden" in reason):
+            raise StoreRefused(f"CouchDB refused {method} {path or '/'} on {self.url} ({said})")
+        if status == 413:
+            raise BatchTooLarge(f"CouchDB refused {method} {path or '/'} as too large ({said})",
+                                doc_id=reason if error == "document_too_large" else None)
+        if status == 429 or (status >= 500 and status != 501):
+            raise StoreUnavailable(f"CouchDB at {self.url} is unavailable ({said})")
+        if status == 501:
+            raise StoreRefused(f"CouchDB at {self.url} does not support {method} {path or '/'} ({said})")
+        raise StoreError(f"CouchDB {method} {path or '/'} answered {said}")
+
+    def _json(self, method: str, path: str, **kwargs):
+        """The JSON body of a successful request (a body that is not JSON: StoreUnavailable)."""
+        response = self._request(method, path, **kwargs)
+        try:
+            return response.json()
+        except ValueError:
+            raise StoreUnavailable(f"CouchDB at {self.url} answered {method} {path or '/'} with "
+                                   f"{response.status_code} and a body that is not JSON "
+                                   f"({len(response.content)} bytes)") from None
+
+    def _read(self, method: str, path: str, **kwargs):
+        """`_json` for reads, retried with backoff while the answer is "retry later" (a truncated
+        body is retried, never taken for the end)."""
+        for attempt in range(_READ_RETRIES):
+            try:
+                return self._json(method, path, **kwargs)
+            except StoreUnavailable:
+                if attempt == _READ_RETRIES - 1:
+                    raise
+                time.sleep(0.5 * 2 ** attempt)
+        raise AssertionError("unreachable")
 
     def ping(self) -> None:
         self._request("GET", "", ok=(200, 404))
@@ -81,10 +151,36 @@ class CouchStore(MessageStore):
     def _setup(self) -> None:
         response = self._request("GET", "", ok=(200, 404))
         if response.status_code == 404:
-            self._request("PUT", "", ok=(201, 202, 412))
-        for name, fields in _INDEXES.items():
-            self._request("POST", "/_index", json={"index": {"fields": fields}, "name": name,
-                                                     "ddoc": name, "type": "json"})
+            try:
+                self._request("PUT", "", ok=(201, 202, 412))
+            except StoreRefused as err:
+                raise StoreRefused(f"CouchDB database {self.db_name} does not exist and this account "
+                                   f"may not create it (an admin creates it, e.g. ros_mongo_bag setup): "
+                                   f"{err}") from None
+        if self.indexed is None:
+            self.ensure_indexes()
+
+    def ensure_indexes(self) -> bool:
+        """Create the Mango indexes (design documents) unless they exist; tolerant of another
+        robot creating them at the same time; False (with one warning) when the account may not."""
+        existing = {index.get("name") for index in self._json("GET", "/_index").get("indexes", [])}
+        missing = [name for name in _INDEXES if name not in existing]
+        for name in missing:
+            body = {"index": {"fields": _INDEXES[name]}, "name": name, "ddoc": name, "type": "json"}
+            try:
+                self._request("POST", "/_index", json=body)
+            except StoreRefused as err:
+                log.warning("cannot create the Mango indexes of %s (%s): recording works; reads go "
+                            "through _all_docs, slower, until an admin runs `ros_mongo_bag setup`",
+                            self.url, err)
+                self.indexed = False
+                return False
+            except StoreUnavailable as err:
+                if "error_saving_ddoc" in str(err) and "conflict" in str(err):
+                    continue  # another client created it at the same time
+                raise
+        self.indexed = True
+        return True
 
     def close(self) -> None:
         self.session.close()
@@ -114,15 +210,39 @@ class CouchStore(MessageStore):
 
     def _write_batch(self, bodies: List[bytes], errors: list) -> int:
         payload = b"".join((b'{"docs":[', b",".join(bodies), b"]}"))
-        response = self._request("POST", "/_bulk_docs", data=payload,
-                                 headers={"Content-Type": "application/json"})
-        stored = 0
-        for result in response.json():
+        try:
+            response = self._request("POST", "/_bulk_docs", data=payload,
+                                     headers={"Content-Type": "application/json"})
+        except StoreError as err:
+            if type(err) is StoreError and "answered 400" in str(err):  # the batch is malformed
+                raise BatchTooLarge(str(err)) from None
+            raise
+        try:
+            results = response.json()
+        except ValueError:
+            raise StoreUnavailable(f"CouchDB at {self.url} answered _bulk_docs with "
+                                   f"{response.status_code} and a body that is not JSON") from None
+        if not isinstance(results, list):
+            raise StoreUnavailable(f"CouchDB at {self.url} answered _bulk_docs with {results!r:.200}")
+        stored, written = 0, []
+        for result in results:
             if "error" not in result:
                 stored += 1
+                written.append(result.get("id"))
             elif result["error"] != "conflict":  # conflict: stored by an earlier attempt
                 errors.append(f"{result.get('id')}: {result['error']} {result.get('reason', '')}")
+        if response.status_code == 202 and written:
+            self._check_durable(written)
         return stored
+
+    def _check_durable(self, ids: List[str]) -> None:
+        """After a 202 (accepted without the write quorum): every document must be readable."""
+        rows = self._json("POST", "/_all_docs", json={"keys": ids}).get("rows", [])
+        missing = [row.get("key") for row in rows if "error" in row or row.get("value", {}).get("deleted")]
+        if missing or len(rows) != len(ids):
+            raise StoreUnavailable(f"CouchDB at {self.url} accepted a write without its quorum (202) "
+                                   f"and {len(missing) or len(ids) - len(rows)} documents are not "
+                                   f"readable yet")
 
     def _put_topic_doc(self, info: TopicInfo) -> None:
         self._request("PUT", "/" + quote(info.id, safe=""), json=topic_doc(info), ok=(201, 202, 409))
@@ -130,7 +250,7 @@ class CouchStore(MessageStore):
     # -- reading -----------------------------------------------------------------------------
     def _topic_docs(self) -> List[dict]:
         params = {"startkey": '"topic-"', "endkey": '"topic-\ufff0"', "include_docs": "true"}
-        rows = self._request("GET", "/_all_docs", params=params).json()["rows"]
+        rows = self._read("GET", "/_all_docs", params=params)["rows"]
         return [row["doc"] for row in rows if row.get("doc")]
 
     def _docs(self, query: Query, newest_first: bool, limit: Optional[int],
@@ -157,6 +277,10 @@ class CouchStore(MessageStore):
     def _stream(self, query: Query, topic: Optional[str], newest_first: bool, limit: Optional[int],
                 fields: Optional[List[str]]) -> Iterator[dict]:
         base = _selector(query, topic)
+        if self.indexed is None:
+            self._check_indexes()
+        if not self.indexed:
+            return self._by_id(query, base, newest_first, limit, fields)
         direction = "desc" if newest_first else "asc"
         sort = [{"topic": direction}, {"receive_time": direction}] if topic else [{"receive_time": direction}]
         page = _Pager(self._find, base, sort, fields, self.page_size, newest_first)
@@ -184,13 +308,56 @@ class CouchStore(MessageStore):
 
     def _find(self, body: dict) -> List[dict]:
         try:
-            return self._request("POST", "/_find", json=body).json()["docs"]
-        except StoreUnavailable:
-            raise
+            return self._read("POST", "/_find", json=body)["docs"]
         except StoreError as err:
-            if "answered 400" in str(err):
+            if type(err) is StoreError and "answered 400" in str(err):
                 raise QueryError(f"CouchDB rejected the query: {err}") from None
             raise
+
+    def _check_indexes(self) -> None:
+        """Whether the Mango indexes exist (reads without them take the slower `_by_id` path)."""
+        existing = {index.get("name") for index in self._read("GET", "/_index").get("indexes", [])}
+        self.indexed = all(name in existing for name in _INDEXES)
+        if not self.indexed:
+            log.warning("%s has no Mango indexes (an admin creates them with `ros_mongo_bag setup`): "
+                        "reading in id order through _all_docs, slower", self.url)
+
+    def _by_id(self, query: Query, base: dict, newest_first: bool, limit: Optional[int],
+               fields: Optional[List[str]]) -> Iterator[dict]:
+        """Without indexes: message ids in receive-time order from `_all_docs` ranges, each page
+        matched by `_find` without sort (the server's own matching), sorted here."""
+        selector = dict(base)
+        selector["receive_time"] = {"$gte": -1e300 if query.start_time is None else query.start_time}
+        if query.end_time is not None:
+            selector["receive_time"]["$lte"] = query.end_time
+        low = _id_bound(query.start_time, -1, "") if query.start_time is not None else "0"
+        high = _id_bound(query.end_time, 1, "\ufff0") if query.end_time is not None else "9\ufff0"
+        if fields:
+            fields = sorted(set(fields) | {"_id", "receive_time"})
+        page = max(self.page_size, 500)
+        start, skip, yielded = (high, low) if newest_first else (low, high), 0, 0
+        key, end = start
+        while limit is None or yielded < limit:
+            params = {"startkey": json.dumps(key), "endkey": json.dumps(end), "limit": page, "skip": skip}
+            if newest_first:
+                params["descending"] = "true"
+            rows = self._read("GET", "/_all_docs", params=params)["rows"]
+            ids = [row["id"] for row in rows]
+            if not ids:
+                return
+            body = {"selector": {"$and": [selector, {"_id": {"$in": ids}}]}, "limit": len(ids)}
+            if fields:
+                body["fields"] = fields
+            docs = sorted(self._find(body), key=lambda d: (d["receive_time"], d["_id"]),
+                          reverse=newest_first)
+            for doc in docs:
+                if limit is not None and yielded >= limit:
+                    return
+                yielded += 1
+                yield doc
+            if len(rows) < page:
+                return
+            key, skip = ids[-1], 1
 
     def _load_blob(self, message_id: str) -> bytes:
         response = self._request("GET", f"/{quote(message_id, safe='')}/raw", ok=(200, 404),
@@ -256,7 +423,8 @@ class _Pager:
 
     def windows(self, bounds: Optional[Tuple[float, float]], limit: Optional[int]) -> Iterator[dict]:
         """Documents within `bounds`, read window by window; each window's span doubles while
-        windows answer fast and halves when they are slow."""
+        windows answer fast or hold few documents, and halves (down to `_MIN_WINDOW`) when they are
+        slow and dense."""
         if bounds is None:
             return
         low, high = bounds
@@ -267,16 +435,22 @@ class _Pager:
                 start, end, last = max(low, edge - span), edge, edge - span <= low
             else:
                 start, end, last = edge, min(high, edge + span), edge + span >= high
-            began = time.monotonic()
+            began, count = time.monotonic(), 0
             for doc in self.range(start, end, None if limit is None else limit - yielded,
                                   open_end=not last):
                 yielded += 1
+                count += 1
                 yield doc
             if last or (limit is not None and yielded >= limit):
                 return
             edge = start if self.newest_first else end
             took = time.monotonic() - began
-            span = span * 2 if took < 0.1 else span / 2 if took > 0.5 else span
+            # A window shrinks only when it was slow because it was dense (more than a page), never
+            # below a floor; a slow link with sparse windows grows them: reading always advances.
+            if took > 0.5 and count > self.page_size:
+                span = max(span / 2, _MIN_WINDOW)
+            elif took < 0.1 or count < self.page_size // 4:
+                span *= 2
 
 
 def _take(items: Iterator[dict], limit: int) -> Iterator[dict]:
@@ -293,9 +467,29 @@ def _dumps(doc: dict) -> Optional[bytes]:
         return None
 
 
-def _reason(response: requests.Response) -> str:
+def _id_bound(seconds: float, margin: int, suffix: str) -> str:
+    """The message id prefix for a receive time (ids begin with the time in nanoseconds), widened
+    by `margin` microseconds against rounding (the selector checks the exact time)."""
+    nanoseconds = max(0, int(round(seconds * 1e9)) + margin * 1000)
+    return f"{nanoseconds:019d}{suffix}"
+
+
+def _ssl_reason(err: Exception) -> str:
+    """The OpenSSL reason of a TLS failure (e.g. CERTIFICATE_VERIFY_FAILED), without any URL."""
+    text = str(err)
+    for marker in ("CERTIFICATE_VERIFY_FAILED", "TLSV13_ALERT_CERTIFICATE_REQUIRED", "SSLV3_ALERT",
+                   "WRONG_VERSION_NUMBER", "certificate required", "certificate verify failed"):
+        if marker in text:
+            return marker
+    return type(err).__name__
+
+
+def _reason(response: requests.Response) -> Tuple[str, str]:
+    """(error, reason) of a CouchDB error answer (credentials never appear in them)."""
     try:
         data = response.json()
-        return f"{data.get('error', '')}: {data.get('reason', '')}".strip(": ")
+        if isinstance(data, dict):
+            return str(data.get("error", "")), str(data.get("reason", ""))
     except ValueError:
-        return response.text[:200]
+        pass
+    return "", response.text[:200]

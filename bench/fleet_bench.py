@@ -1,0 +1,362 @@
+#!/usr/bin/env python3
+"""Fleet benchmark: three robots record locally and replicate to one central CouchDB-API server.
+
+Each robot (its own roscore, local pouchdb-server and launch/fleet.launch) gets 100 Hz
+nav_msgs/Odometry, 10 Hz 1081-beam sensor_msgs/LaserScan and 5 Hz 640x480 rgb8 sensor_msgs/Image
+(921 KB: an attachment) from a publisher of this script (`--publish`, a real ROS node). Run 1
+(replicated): `--duration` s of steady state, then the central server is stopped for `--partition`
+s while the robots keep recording, then restarted; `--tail` s more. Run 2 (direct, the peer): the
+same robots' recorders write straight to the central server for `--duration` s.
+
+Figures: messages lost (published - central), central throughput (messages/s and MB/s stored
+centrally), lag = time a message becomes visible in the central `_changes` feed minus its receive
+time (same machine clock), p50/p99 in steady state (messages received after the first 5 s of run 1
+and before the partition), catch-up time = from the central restart until every message received
+before it is central (faster than real time when below `--partition`), and the direct run's
+figures with ratios. Targets (issue 13): 0 lost, steady-state lag p99 < 5 s, catch-up < partition.
+Printed, written to artifacts/bench/fleet.json, plot artifacts/bench/fleet_lag.png.
+
+    scripts/in_env.sh python bench/fleet_bench.py                 # 60 s + 60 s partition
+    scripts/in_env.sh python bench/fleet_bench.py --quick         # 10 s + 10 s, a smoke run
+"""
+import argparse
+import json
+import math
+import shutil
+import struct
+import sys
+import threading
+import time
+from io import BytesIO
+from pathlib import Path
+
+import numpy as np
+import requests
+
+from ros_harness import LaunchSet, ManagedProcess, PouchDBServer, RosCore, wait_until
+
+ROOT = Path(__file__).resolve().parents[1]
+RATES = {"/odom": 100.0, "/scan": 10.0, "/camera/rgb/image_raw": 5.0}
+TOPICS = "[/odom, /scan, /camera/rgb/image_raw]"
+
+
+# -- the publisher (run as `fleet_bench.py --publish SECONDS` under a robot's roscore) ----------
+
+def _samples():
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import Image, LaserScan
+
+    odom = Odometry()
+    odom.header.frame_id, odom.child_frame_id = "odom", "base_link"
+    odom.pose.pose.orientation.w = 1.0
+    scan = LaserScan(angle_min=-2.356, angle_max=2.356, angle_increment=4.712 / 1080,
+                     range_min=0.05, range_max=30.0,
+                     ranges=[2.0 + math.sin(i / 50.0) for i in range(1081)],
+                     intensities=[100.0] * 1081)
+    image = Image(height=480, width=640, encoding="rgb8", step=640 * 3,
+                  data=bytes((i * 31) % 251 for i in range(640 * 480 * 3)))
+    return {"/odom": odom, "/scan": scan, "/camera/rgb/image_raw": image}
+
+
+def publish(duration: float) -> int:
+    import rospy
+
+    rospy.init_node("fleet_bench_publisher", disable_signals=True)
+    messages = _samples()
+    publishers = {t: rospy.Publisher(t, type(m), queue_size=200) for t, m in messages.items()}
+    while min(p.get_num_connections() for p in publishers.values()) < 1:
+        time.sleep(0.05)  # the condition: the recorder subscribed to every topic
+    time.sleep(0.5)
+    counts = {t: 0 for t in messages}
+    start = time.monotonic() + 0.2
+
+    def run(topic):
+        buffer = BytesIO()
+        messages[topic].serialize(buffer)
+        template = bytearray(buffer.getvalue())
+        raw = type("Raw", (rospy.AnyMsg,), {"_type": messages[topic]._type,
+                                            "_md5sum": messages[topic]._md5sum,
+                                            "_full_text": messages[topic]._full_text,
+                                            "_has_header": False, "__slots__": []})()
+        publisher = rospy.Publisher(topic, type(raw), queue_size=200)
+        while publisher.get_num_connections() < 1:
+            time.sleep(0.05)
+        for index in range(int(duration * RATES[topic])):
+            delay = start + index / RATES[topic] - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            now = rospy.Time.now()
+            struct.pack_into("<III", template, 0, index, now.secs, now.nsecs)
+            raw._buff = bytes(template)
+            publisher.publish(raw)
+            counts[topic] = index + 1
+
+    threads = [threading.Thread(target=run, args=(t,)) for t in messages]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    time.sleep(1.0)
+    print(json.dumps({"published": counts}), flush=True)
+    return 0
+
+
+# -- measuring -----------------------------------------------------------------------------------
+
+class CentralWatch:
+    """Follows the central `_changes` feed: arrival time and size of every message document."""
+
+    def __init__(self, db_url: str):
+        self.db_url = db_url
+        self.arrivals = {}  # id -> (arrival wall time, receive_time, robot, bytes)
+        self.since = "0"
+        self._stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self):
+        session = requests.Session()
+        while not self._stop.is_set():
+            try:
+                answer = session.get(self.db_url + "/_changes", timeout=70, params={
+                    "since": self.since, "feed": "longpoll", "timeout": "5000",
+                    "include_docs": "true", "limit": "2000"}).json()
+            except (requests.RequestException, ValueError):
+                time.sleep(0.5)  # the central server is down: look again
+                continue
+            now = time.time()
+            for change in answer.get("results", []):
+                doc = change.get("doc") or {}
+                if doc.get("kind") == "message" and change["id"] not in self.arrivals:
+                    size = doc.get("size", 0)
+                    self.arrivals[change["id"]] = (now, doc["receive_time"], doc.get("robot_id"), size)
+            self.since = str(answer.get("last_seq", self.since))
+
+    def count(self) -> int:
+        return len(self.arrivals)
+
+    def stop(self):
+        self._stop.set()
+        self.thread.join(timeout=80)
+
+
+def local_messages(db_url: str) -> int:
+    try:
+        return requests.get(db_url, timeout=30).json()["doc_count"]
+    except (requests.RequestException, ValueError, KeyError):
+        return -1
+
+
+class Robot:
+    def __init__(self, index, work: Path, **launch_args):
+        self.robot_id = f"robot{index}"
+        self.work = work / self.robot_id
+        self.core = RosCore(log_dir=self.work / "ros").start()
+        self.launches = LaunchSet(self.core, self.work / "launch")
+        self.launch_args = launch_args
+        self.store = None
+        self.publisher = None
+
+    def start_fleet(self, central_url):
+        self.store = PouchDBServer(self.work / "store").start()
+        self.url = self.store.database_url("robot_data")
+        self.launches(str(ROOT / "launch" / "fleet.launch"), central_url=central_url,
+                      robot_id=self.robot_id, local_db="false", local_db_port=self.store.port,
+                      topics=TOPICS, spool_path=str(self.work / "spool"))
+
+    def start_direct(self, central_db_url):
+        self.launches("ros_mongo", "ros_mongo_server.launch", db_url=central_db_url,
+                      robot_id=self.robot_id, topics=TOPICS, spool_path=str(self.work / "spool_direct"))
+
+    def publish(self, duration):
+        self.publisher = ManagedProcess([sys.executable, __file__, "--publish", duration],
+                                        name=f"publisher {self.robot_id}",
+                                        log_path=self.work / f"publisher_{time.time_ns()}.log",
+                                        env=self.core.env()).start()
+
+    def published(self) -> int:
+        for line in self.publisher.log_path.read_text().splitlines():
+            if line.startswith("{"):
+                return sum(json.loads(line)["published"].values())
+        raise RuntimeError(f"publisher of {self.robot_id} printed no counts:\n{self.publisher.log_tail()}")
+
+    def close(self):
+        if self.publisher is not None:
+            self.publisher.stop()
+        self.launches.stop_all()
+        if self.store is not None:
+            self.store.stop()
+        self.core.stop()
+
+
+def _percentiles(values):
+    if not values:
+        return {"p50": None, "p99": None, "n": 0}
+    array = np.asarray(values)
+    return {"p50": float(np.percentile(array, 50)), "p99": float(np.percentile(array, 99)),
+            "n": int(array.size)}
+
+
+def _progress(what, watch, expected=None):
+    total = f" of {expected}" if expected else ""
+    print(f"  {time.strftime('%H:%M:%S')} {what}: {watch.count()}{total} messages central", flush=True)
+
+
+def run_replicated(work: Path, robots_n: int, duration: float, partition: float, tail: float):
+    central = PouchDBServer(work / "central").start()
+    central_url = central.database_url("fleet")
+    robots = []
+    try:
+        robots = [Robot(i, work / "replicated") for i in range(1, robots_n + 1)]
+        for robot in robots:
+            robot.start_fleet(central_url)
+        wait_until(lambda: requests.get(central_url, timeout=5).ok, 300, what="central database")
+        watch = CentralWatch(central_url)
+        total = duration + partition + tail
+        for robot in robots:
+            robot.publish(total)
+        t0 = time.time()
+        while time.time() - t0 < duration:
+            time.sleep(5)  # progress display while the steady state runs
+            _progress("steady", watch)
+        central.stop()
+        t_cut = time.time()
+        print(f"  {time.strftime('%H:%M:%S')} central stopped for {partition:.0f} s", flush=True)
+        time.sleep(partition)  # the partition itself: the condition is its length
+        central.start()
+        t_heal = time.time()
+        print(f"  {time.strftime('%H:%M:%S')} central restarted", flush=True)
+        wait_until(lambda: not any(r.publisher.alive for r in robots), total + 600,
+                   what="publishers done")
+        published = sum(r.published() for r in robots)
+        last_change, last_count = time.time(), -1
+        while watch.count() < published and time.time() - last_change < 120:
+            time.sleep(2)
+            if watch.count() != last_count:
+                last_change, last_count = time.time(), watch.count()
+            _progress("draining", watch, published)
+        watch.stop()
+        arrivals = list(watch.arrivals.values())
+        steady = [a - r for a, r, _, _ in arrivals if t0 + 5 <= r < t_cut]
+        before_heal = [a for a, r, _, _ in arrivals if r < t_heal]
+        catch_up = max(before_heal) - t_heal if before_heal else None
+        window = [(a, s) for a, r, _, s in arrivals if t_heal <= a <= t_heal + (catch_up or 0)]
+        stored = len(arrivals)
+        first, last = min(a for a, *_ in arrivals), max(a for a, *_ in arrivals)
+        result = {
+            "published": published, "central": stored, "lost": published - stored,
+            "local": sum(local_messages(r.url) for r in robots),
+            "steady_lag_s": _percentiles(steady),
+            "catch_up_s": catch_up, "partition_s": partition,
+            "catch_up_rate_msgs_per_s": len(window) / catch_up if catch_up else None,
+            "catch_up_mb_per_s": sum(s for _, s in window) / 2 ** 20 / catch_up if catch_up else None,
+            "central_msgs_per_s_overall": stored / (last - first) if last > first else None,
+            "timeline": [(a - t0, a - r) for a, r, _, _ in sorted(arrivals)][::5],
+            "cut_at": t_cut - t0, "heal_at": t_heal - t0,
+        }
+        return result
+    finally:
+        for robot in robots:
+            robot.close()
+        central.stop()
+
+
+def run_direct(work: Path, robots_n: int, duration: float):
+    central = PouchDBServer(work / "central_direct").start()
+    central_url = central.database_url("fleet")
+    robots = []
+    try:
+        robots = [Robot(i, work / "direct") for i in range(1, robots_n + 1)]
+        for robot in robots:
+            robot.start_direct(central_url)  # the recorders create the database
+        watch = CentralWatch(central_url)
+        for robot in robots:
+            robot.publish(duration)
+        t0 = time.time()
+        wait_until(lambda: not any(r.publisher.alive for r in robots), duration + 600,
+                   what="publishers done")
+        published = sum(r.published() for r in robots)
+        last_change, last_count = time.time(), -1
+        while watch.count() < published and time.time() - last_change < 120:
+            time.sleep(2)
+            if watch.count() != last_count:
+                last_change, last_count = time.time(), watch.count()
+            _progress("direct", watch, published)
+        watch.stop()
+        arrivals = list(watch.arrivals.values())
+        lags = [a - r for a, r, _, _ in arrivals if r >= t0 + 5]
+        first, last = min(a for a, *_ in arrivals), max(a for a, *_ in arrivals)
+        return {"published": published, "central": len(arrivals),
+                "lost": published - len(arrivals), "lag_s": _percentiles(lags),
+                "central_msgs_per_s_overall": len(arrivals) / (last - first) if last > first else None}
+    finally:
+        for robot in robots:
+            robot.close()
+        central.stop()
+
+
+def plot(result, output: Path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    timeline = result["replicated"]["timeline"]
+    fig, ax = plt.subplots(figsize=(9, 4))
+    ax.plot([t for t, _ in timeline], [lag for _, lag in timeline], ".", ms=2,
+            label="replicated: central arrival - receive time")
+    ax.axvspan(result["replicated"]["cut_at"], result["replicated"]["heal_at"], color="0.85",
+               label="central server down")
+    ax.set_xlabel("seconds since the robots started publishing")
+    ax.set_ylabel("lag (s)")
+    ax.set_title("Fleet replication: 3 robots -> central (pouchdb-server)")
+    ax.legend(loc="upper left")
+    fig.tight_layout()
+    fig.savefig(output / "fleet_lag.png", dpi=120)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--publish", type=float, help=argparse.SUPPRESS)
+    parser.add_argument("--quick", action="store_true", help="10 s steady + 10 s partition")
+    parser.add_argument("--duration", type=float, help="steady-state seconds (default 60)")
+    parser.add_argument("--partition", type=float, help="seconds the central server is down (60)")
+    parser.add_argument("--tail", type=float, default=20.0, help="seconds published after the partition")
+    parser.add_argument("--robots", type=int, default=3)
+    parser.add_argument("--output", type=Path, default=ROOT / "artifacts" / "bench")
+    args, _ = parser.parse_known_args()
+    if args.publish is not None:
+        return publish(args.publish)
+    duration = args.duration or (10.0 if args.quick else 60.0)
+    partition = args.partition or (10.0 if args.quick else 60.0)
+    args.output.mkdir(parents=True, exist_ok=True)
+    work = args.output / "fleet_work"
+    shutil.rmtree(work, ignore_errors=True)
+    print(f"replicated run: {args.robots} robots, {duration:.0f} s steady, {partition:.0f} s "
+          f"partition, {args.tail:.0f} s after", flush=True)
+    replicated = run_replicated(work, args.robots, duration, partition, args.tail)
+    print(f"direct run: {args.robots} robots writing to the central server for {duration:.0f} s",
+          flush=True)
+    direct = run_direct(work, args.robots, duration)
+    result = {"robots": args.robots, "rates_hz": RATES, "replicated": replicated, "direct": direct}
+    if direct["central_msgs_per_s_overall"] and replicated["catch_up_rate_msgs_per_s"]:
+        result["catch_up_rate_over_direct_rate"] = (replicated["catch_up_rate_msgs_per_s"]
+                                                    / direct["central_msgs_per_s_overall"])
+    if direct["lag_s"]["p99"] and replicated["steady_lag_s"]["p99"]:
+        result["steady_lag_p99_over_direct"] = replicated["steady_lag_s"]["p99"] / direct["lag_s"]["p99"]
+    (args.output / "fleet.json").write_text(json.dumps(result, indent=1))
+    plot(result, args.output)
+    shown = {k: v for k, v in replicated.items() if k != "timeline"}
+    print(json.dumps({"replicated": shown, "direct": direct,
+                      **{k: v for k, v in result.items() if k.endswith("_direct") or
+                         k.endswith("direct_rate")}}, indent=1))
+    ok = (replicated["lost"] == 0 and direct["lost"] == 0
+          and (replicated["steady_lag_s"]["p99"] or 1e9) < 5.0
+          and (replicated["catch_up_s"] if replicated["catch_up_s"] is not None else 1e9) < partition)
+    print(f"targets (0 lost, steady lag p99 < 5 s, catch-up < {partition:.0f} s): "
+          f"{'met' if ok else 'NOT met'}; figures in {args.output / 'fleet.json'}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,132 @@
+"""The Python 3.8 / no-PyTorch configuration from nothing, through ROS (issue 18).
+
+Real nodes through region_search.launch / embedding_server.launch with `backend:=word2vec` and
+an EMPTY cache folder, the shipped word2vec settings (`source` auto: Brown + WordNet glosses when
+a Brown corpus is found, else the WordNet glosses of Debian's wordnet-base), on the labels of a
+real building floor (../shared/data/maps/towne_levine_labels.json, GRASP-ML's Towne/Levine floor).
+
+The start order is the unfavourable one: the recommender first (no embedding service at all),
+then the embedding server, which must train word2vec (minutes; the test waits on the server's
+~active_backend parameter, with a generous timeout, never on time), then a restart of the
+embedding server (now a warm start from the cache) that the recommender rides through.
+The expected places are the labels the phrases name or mean (chosen by hand from the label
+names), not answers recorded from the code.
+"""
+import re
+import shutil
+import threading
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+from region_search.srv import Embed, RecommendRegion
+from ros_harness import wait_until
+
+pytestmark = [pytest.mark.ros, pytest.mark.wordnet]
+
+RECOMMEND = "/region_recommender/recommend"
+# Training word2vec on a loaded 2-core machine took up to ~15 minutes (README); the bound is
+# only there so that a hung server fails the test.
+TRAINING_TIMEOUT = 3600.0
+
+# phrase -> the real label it means (by its name)
+CASES = [("room 321", "towne_321"), ("Towne 311", "towne_311"), ("the biology lab", "bio_lab"),
+         ("a soda machine", "vending_machines"), ("Charity's office", "charitys_office"),
+         ("the far corner of Levine", "levine_far_corner"),
+         ("the way to Skirkanich", "to_skirkanich"), ("the GRASP lab", "grasp")]
+
+
+class Diagnostics:
+    """The embedding server's /diagnostics statuses, as received."""
+
+    def __init__(self, rospy_node):
+        self.statuses = []
+        self._lock = threading.Lock()
+        self.subscriber = rospy_node.Subscriber("/diagnostics", DiagnosticArray, self._received)
+
+    def _received(self, message):
+        with self._lock:
+            self.statuses += [s for s in message.status if s.name == "embedding_server: model"]
+
+    def seen(self, level, text=""):
+        with self._lock:
+            return next((s for s in self.statuses if s.level == level and text in s.message), None)
+
+
+def answers(recommend):
+    results = {}
+    for phrase, _ in CASES:
+        response = recommend(phrase=phrase, top_k=3)
+        assert response.success, (phrase, response.message)
+        assert response.backend == "word2vec" and "(word ranking, word2vec backend)" in response.message
+        results[phrase] = list(response.labels)
+    return results
+
+
+@pytest.mark.timeout(TRAINING_TIMEOUT + 1200)  # the suite's 600 s cannot hold a training
+def test_word2vec_from_an_empty_cache_in_any_start_order_then_a_server_restart(
+        roslaunch, rospy_node, tmp_path, shared_data_dir):
+    cache = tmp_path / "empty_cache"
+    cache.mkdir()
+    labels = tmp_path / "labels.json"
+    shutil.copy(shared_data_dir / "maps" / "towne_levine_labels.json", labels)
+    diagnostics = Diagnostics(rospy_node)
+    recommend = rospy_node.ServiceProxy(RECOMMEND, RecommendRegion)
+
+    # 1. The recommender alone: it serves at once and says what it waits for.
+    recommender = roslaunch("region_search", "region_search.launch", labels_path=str(labels),
+                            backend="word2vec", start_embedding_server="false", layer_service="")
+    recommender.wait_for_services([RECOMMEND], timeout=120)
+    waiting = recommend(phrase="room 321", top_k=3)
+    assert not waiting.success
+    assert waiting.message.startswith("waiting for the embedding service /embedding_server/embed")
+    wait_until(lambda: "waiting for the embedding service /embedding_server/embed" in
+               recommender.log_tail(200), 60, what="the recommender logging what it waits for")
+
+    # 2. The embedding server, word2vec, empty cache: services at once, training reported.
+    server = roslaunch("region_search", "embedding_server.launch", backend="word2vec",
+                       cache_dir=str(cache))
+    server.wait_for_services(["/embedding_server/embed"], timeout=120)
+
+    def loading_answer():
+        response = recommend(phrase="room 321", top_k=3)
+        return response if re.fullmatch(
+            r"embedding model still loading \(trained for \d+ s of about \d+ s, epoch \d+/\d+\)",
+            response.message) else None
+
+    loading = wait_until(loading_answer, 900, what="'still loading (trained for N s of about M s)'")
+    assert list(loading.labels) == []
+    embed = rospy_node.ServiceProxy("/embedding_server/embed", Embed)(phrases=["robot"])
+    assert not embed.success and embed.message.startswith("embedding model still loading (")
+    wait_until(lambda: diagnostics.seen(DiagnosticStatus.WARN, "embedding model still loading"),
+               120, what="a WARN /diagnostics status while the model trains")
+    wait_until(lambda: "embedding model still loading (trained for" in server.log_tail(400), 120,
+               what="the training progress in the embedding server's log")
+
+    # 3. Trained (however long it takes): correct answers through the ROS service.
+    wait_until(lambda: rospy_node.has_param("/embedding_server/active_backend"), TRAINING_TIMEOUT,
+               interval=1.0, what="word2vec trained into the empty cache")
+    assert rospy_node.get_param("/embedding_server/active_backend") == "word2vec"
+    first = wait_until(lambda: answers(recommend), 60, what="answers after training")
+    for phrase, expected in CASES:
+        assert first[phrase][0] == expected, (phrase, first[phrase])
+    trained = list(cache.glob("word2vec-*/meta.json"))
+    assert len(trained) == 1, list(cache.iterdir())
+    wait_until(lambda: diagnostics.seen(DiagnosticStatus.OK, "ready: word2vec"), 60,
+               what="an OK /diagnostics status once ready")
+    assert "trained now in" in server.log_tail(400)
+
+    # 4. The server goes away: the recommender says so; it comes back (warm): answers again.
+    roslaunch.stop(server)
+    gone = wait_until(lambda: (lambda r: r if not r.success else None)(
+        recommend(phrase="room 321", top_k=3)), 60, what="a failure while no server runs")
+    assert gone.message.startswith("waiting for the embedding service /embedding_server/embed")
+    server = roslaunch("region_search", "embedding_server.launch", backend="word2vec",
+                       cache_dir=str(cache))
+    wait_until(lambda: "(cached, ready in" in server.log_tail(400), 600,
+               what="the restarted server loading the cached model")
+    again = wait_until(lambda: (lambda r: r if r.success else None)(
+        recommend(phrase="room 321", top_k=3)), 120, what="answers after the server restarted")
+    assert list(again.labels) == first["room 321"]
+    assert answers(recommend) == first
+    assert list(cache.glob("word2vec-*/meta.json")) == trained  # not trained a second time

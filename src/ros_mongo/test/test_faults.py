@@ -1,0 +1,376 @@
+"""What a real Apache CouchDB 3 answers and pouchdb-server never does: accounts, size limits,
+cluster timeouts and quorum, cut-off bodies, latency, a reverse proxy's path prefix.
+
+These answers come from ros_harness.fault_proxy: a REAL process on its own port in front of a real
+pouchdb-server, answering with the exact status and JSON bodies a real CouchDB 3.5 gave
+(/work/shared/DATABASES.md), switched on and off while the real recorder node (roscore + roslaunch)
+runs. Expected values come from what the test published, never from the code under test.
+"""
+import subprocess
+import threading
+import time
+import uuid
+
+import pytest
+import requests
+import rospy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from nav_msgs.msg import Odometry
+from ros_mongo_samples import serialized
+from std_msgs.msg import String
+
+from ros_harness import FaultProxy, wait_until
+from ros_mongo import TopicInfo, make_record, open_store
+from ros_mongo.bagio import export_bag
+from ros_mongo.errors import StoreError, StoreRefused
+from ros_mongo.quarantine import import_quarantine
+from ros_mongo.query import parse_query
+from ros_mongo.records import MessageRecord, split_time
+from ros_mongo.spool import read_entries
+
+pytestmark = [pytest.mark.db]
+
+
+@pytest.fixture
+def proxy(couchdb_server, tmp_path):
+    with FaultProxy(couchdb_server.url, tmp_path) as running:
+        yield running
+
+
+@pytest.fixture
+def prefixed_proxy(couchdb_server, tmp_path):
+    with FaultProxy(couchdb_server.url, tmp_path, prefix="/couchdb") as running:
+        yield running
+
+
+def _names(prefix="test_"):
+    return prefix + uuid.uuid4().hex[:12]
+
+
+def _admin_creates(couchdb_server, name):
+    """The admin's step: the database exists before the member account records into it."""
+    assert requests.put(f"{couchdb_server.url}/{name}", timeout=30).status_code in (201, 202)
+
+
+def _records(count, t0=1000.0, topic="/chatter", step=0.01):
+    return [make_record(topic, String, serialized(String(data=f"m{i}")), receive=split_time(t0 + step * i),
+                        session_id="s1") for i in range(count)]
+
+
+# -- the store on its own (no ROS) -------------------------------------------------------------------
+def test_member_account_records_and_reads_without_any_design_document(couchdb_server, proxy, tmp_path):
+    name = _names()
+    _admin_creates(couchdb_server, name)
+    proxy.set(member=True)
+    records = _records(700)
+    with open_store(proxy.database_url(name)) as store:
+        assert store.indexed is False                 # the _index POST was refused as for a member
+        store.put_topic(TopicInfo.of_class("/chatter", String))
+        assert store.insert_records(records) == 700
+        got = [m.message().data for m in store.find_messages(topic="/chatter")]
+        assert got == [f"m{i}" for i in range(700)]
+        newest = [m.message().data for m in store.find_messages(newest_first=True, limit=3)]
+        assert newest == ["m699", "m698", "m697"]
+        window = [m.message().data for m in store.find_messages(start_time=1001.0, end_time=1001.05)]
+        assert window == [f"m{i}" for i in range(100, 106)]
+        assert store.count_messages(topic="/chatter") == 700
+        result = export_bag(store, parse_query("topic /chatter"), tmp_path / "out.bag", progress=False)
+        assert result.messages == 700
+    assert proxy.answered("member") >= 1
+    design = requests.get(f"{couchdb_server.url}/{name}/_all_docs",
+                          params={"startkey": '"_design/"', "endkey": '"_design0"'}, timeout=30).json()
+    assert design["rows"] == []                       # nothing an admin would have to write
+
+
+def test_member_cannot_create_the_database_and_is_told_so(proxy):
+    proxy.set(member=True)
+    with pytest.raises(Exception) as err:
+        open_store(proxy.database_url(_names()))
+    assert "may not create it" in str(err.value) and "You are not a server admin." in str(err.value)
+
+
+def test_index_created_by_another_robot_at_the_same_time_is_tolerated(couchdb_server, proxy):
+    proxy.set(index_conflict=True)
+    with open_store(proxy.database_url(_names())) as store:
+        assert store.indexed is True
+    assert proxy.answered("index_conflict") >= 1
+
+
+def test_prefix_latency_truncated_bodies_and_202_quorum(couchdb_server, prefixed_proxy):
+    name = _names()
+    url = prefixed_proxy.database_url(name)           # http://127.0.0.1:PORT/couchdb/<name>
+    with open_store(url, page_size=100) as store:
+        store.put_topic(TopicInfo.of_class("/chatter", String))
+        prefixed_proxy.set(accepted_202=True)
+        assert store.insert_records(_records(300)) == 300     # 202: checked, all readable
+        prefixed_proxy.set(truncate_find=2, latency=0.6)
+        got = [m.message().data for m in store.find_messages(topic="/chatter")]
+    assert got == [f"m{i}" for i in range(300)]               # the cut-off pages were read again
+    assert prefixed_proxy.answered("truncate_find") == 2 and prefixed_proxy.answered("accepted_202") >= 1
+    rows = requests.get(f"{couchdb_server.url}/{name}/_all_docs", timeout=30).json()["rows"]
+    assert len([r for r in rows if r["id"][0].isdigit()]) == 300  # each message once
+
+
+def test_windowed_reader_keeps_advancing_on_a_slow_link(couchdb_server, proxy):
+    """A query the index does not answer alone is read in time windows; 600 ms per answer must not
+    shrink them until reading stops advancing."""
+    with open_store(proxy.database_url(_names())) as store:
+        store.put_topic(TopicInfo.of_class("/chatter", String))
+        store.insert_records(_records(120, step=0.5))            # 60 s of sparse messages
+        proxy.set(latency=0.6)
+        got = []
+        reader = threading.Thread(target=lambda: got.extend(
+            m.message().data for m in store.find_messages(topic="/chatter", session_id="s1")), daemon=True)
+        reader.start()
+        reader.join(240)
+    assert got == [f"m{i}" for i in range(120)]
+
+
+# -- the recorder node through the proxy --------------------------------------------------------------
+class Diagnostics:
+    """The recorder's latest status (level, message, values) from /diagnostics."""
+
+    def __init__(self):
+        self.level, self.message, self.values, self.levels = None, "", {}, []
+        self.subscriber = rospy.Subscriber("/diagnostics", DiagnosticArray, self._receive)
+
+    def _receive(self, msg):
+        for status in msg.status:
+            if status.name == "ros_mongo_server: recorder":
+                self.level, self.message = status.level, status.message
+                self.values = {kv.key: kv.value for kv in status.values}
+                self.levels.append((status.level, status.message))
+
+    def count(self, key):
+        return int(self.values.get(key, -1))
+
+    def close(self):
+        self.subscriber.unregister()
+
+
+@pytest.fixture
+def diagnostics(rospy_node):
+    watcher = Diagnostics()
+    yield watcher
+    watcher.close()
+
+
+class Sender:
+    """Publishes Odometry with pose.position.x = 0, 1, 2 ... (paced: the publisher's rate)."""
+
+    def __init__(self, topic="/odom", rate=500.0):
+        self.publisher = rospy.Publisher(topic, Odometry, queue_size=10000)
+        self.rate, self.sent = rate, 0
+
+    def connected(self):
+        wait_until(lambda: self.publisher.get_num_connections() > 0, 60, what="recorder subscribed")
+        return self
+
+    def send(self, count):
+        for _ in range(count):
+            msg = Odometry()
+            msg.pose.pose.position.x = float(self.sent)
+            self.publisher.publish(msg)
+            self.sent += 1
+            time.sleep(1.0 / self.rate)
+
+    def close(self):
+        self.publisher.unregister()
+
+
+def recorder(roslaunch, url, tmp_path, **params):
+    settings = {"db_url": url, "topics": ["/odom"], "spool_path": str(tmp_path / "recorder.spool"),
+                "retry_period": 0.3, "db_timeout": 10.0, "session_id": "faults", "diagnostics_period": 0.2}
+    settings.update(params)
+    name = f"recorder_{uuid.uuid4().hex[:8]}"
+    launch = roslaunch.node("ros_mongo", "ros_mongo_server", name=name, params=settings)
+    launch.wait_for_nodes([f"/{name}"], timeout=60)
+    return launch
+
+
+def stored_xs(url, topic="/odom"):
+    with open_store(url) as store:
+        return sorted(m.fields["pose"]["pose"]["position"]["x"] for m in store.find_messages(topic=topic))
+
+
+FAULTS = {
+    "operator fixes the password": {"auth": "wrong_password"},
+    "server recovers from timeouts": {"timeout": "writes"},
+    "member account, password rotated": {"member": True, "auth": "wrong_password"},
+}
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("fault", sorted(FAULTS))
+def test_recorder_keeps_every_message_through_a_fault_and_stores_each_once(
+        couchdb_server, proxy, roslaunch, tmp_path, diagnostics, fault):
+    name = _names()
+    _admin_creates(couchdb_server, name)
+    if FAULTS[fault].get("member"):
+        proxy.set(member=True)
+    recorder(roslaunch, proxy.database_url(name), tmp_path)
+    sender = Sender().connected()
+    sender.send(100)
+    wait_until(lambda: diagnostics.count("stored") == 100, 60, what="100 stored")
+    proxy.set(**FAULTS[fault])
+    sender.send(200)
+    wait_until(lambda: diagnostics.count("spool_pending") == 200, 60, what="200 spooled")
+    key = "auth" if "auth" in FAULTS[fault] else "timeout"
+    reason = "Name or password is incorrect." if key == "auth" else "timeout"
+    wait_until(lambda: diagnostics.level == DiagnosticStatus.ERROR and reason in diagnostics.message, 60,
+               what="ERROR on /diagnostics with the server's reason")
+    assert proxy.answered(key) >= 1 and diagnostics.count("stored") == 100
+    proxy.set(member=True) if FAULTS[fault].get("member") else proxy.clear()
+    wait_until(lambda: diagnostics.count("stored") == 300 and diagnostics.count("spool_pending") == 0, 90,
+               what="the spool drained")
+    assert stored_xs(f"{couchdb_server.url}/{name}") == [float(i) for i in range(300)]
+    assert diagnostics.count("dropped") == 0 and diagnostics.count("rejected") == 0
+    wait_until(lambda: diagnostics.level == DiagnosticStatus.OK, 90, what="OK once writes work")
+    assert "secret" not in str(diagnostics.values)
+    sender.close()
+
+
+@pytest.mark.ros
+def test_rotated_password_then_fixed_by_the_operator_with_a_credentials_file(
+        couchdb_server, proxy, roslaunch, tmp_path, diagnostics):
+    name = _names()
+    secret = "Pw-" + uuid.uuid4().hex[:10]
+    credentials = tmp_path / "db_credentials"
+    credentials.write_text(f"robot:{secret}\n")
+    proxy.set(require_auth=f"robot:{secret}")
+    launch = recorder(roslaunch, proxy.database_url(name), tmp_path, db_credentials_file=str(credentials))
+    sender = Sender().connected()
+    sender.send(100)
+    wait_until(lambda: diagnostics.count("stored") == 100, 60, what="100 stored")
+    proxy.set(require_auth="robot:rotated-by-someone")     # the server's password changed
+    sender.send(200)
+    wait_until(lambda: diagnostics.count("spool_pending") == 200, 60, what="200 spooled")
+    wait_until(lambda: diagnostics.level == DiagnosticStatus.ERROR
+               and "Name or password is incorrect." in diagnostics.message, 60, what="ERROR with the reason")
+    proxy.set(require_auth=f"robot:{secret}")               # the operator sets it back
+    wait_until(lambda: diagnostics.count("stored") == 300 and diagnostics.count("spool_pending") == 0, 90,
+               what="the spool drained")
+    assert stored_xs(f"{couchdb_server.url}/{name}") == [float(i) for i in range(300)]
+    shown = str(diagnostics.levels) + str(diagnostics.values) + launch.log_tail(400)
+    assert secret not in shown
+    sender.close()
+
+
+@pytest.mark.ros
+def test_spool_survives_an_auth_error_during_the_drain(couchdb_server, proxy, roslaunch, tmp_path,
+                                                       diagnostics):
+    name = _names()
+    url = proxy.database_url(name)
+    recorder(roslaunch, url, tmp_path)
+    sender = Sender().connected()
+    sender.send(100)
+    wait_until(lambda: diagnostics.count("stored") == 100, 60, what="100 stored")
+    proxy.set(timeout="writes")
+    sender.send(200)
+    wait_until(lambda: diagnostics.count("spool_pending") == 200, 60, what="200 spooled")
+    # reads work (the probe succeeds and the drain starts), every write is refused: rotated password
+    proxy.set(auth="wrong_password", auth_scope="writes")
+    wait_until(lambda: proxy.answered("auth") >= 3, 60, what="three drain attempts refused")
+    assert diagnostics.count("spool_pending") == 200 and diagnostics.count("stored") == 100
+    proxy.clear()
+    wait_until(lambda: diagnostics.count("stored") == 300 and diagnostics.count("spool_pending") == 0, 90,
+               what="the spool drained")
+    assert stored_xs(f"{couchdb_server.url}/{name}") == [float(i) for i in range(300)]
+    sender.close()
+
+
+@pytest.mark.ros
+def test_oversized_document_is_split_out_and_only_it_is_quarantined(couchdb_server, proxy, roslaunch,
+                                                                    tmp_path, diagnostics):
+    name = _names()
+    proxy.set(max_document_size=20000)
+    quarantine = tmp_path / "refused.quarantine"
+    recorder(roslaunch, proxy.database_url(name), tmp_path, topics=["/odom", "/notes"],
+             batch_period=3.0, quarantine_path=str(quarantine))
+    notes = rospy.Publisher("/notes", String, queue_size=100)
+    wait_until(lambda: notes.get_num_connections() > 0, 60, what="/notes subscribed")
+    sender = Sender().connected()
+    big = String(data="x" * 60000)                    # fits pouchdb-server, not this "CouchDB"
+    sender.send(40)
+    notes.publish(String(data="small"))
+    notes.publish(big)
+    sender.send(40)
+    wait_until(lambda: diagnostics.count("stored") == 81 and diagnostics.count("quarantined") == 1, 60,
+               what="81 stored and 1 quarantined")
+    assert proxy.answered("max_document_size") >= 2  # the whole batch, then the document alone
+    direct = f"{couchdb_server.url}/{name}"
+    assert stored_xs(direct) == [float(i) for i in range(80)]
+    with open_store(direct) as store:
+        assert [m.message().data for m in store.find_messages(topic="/notes")] == ["small"]
+    refused = [e for e in read_entries(quarantine) if isinstance(e, MessageRecord)]
+    assert len(refused) == 1 and refused[0].raw == serialized(big)
+    assert diagnostics.count("dropped") == 0 and diagnostics.level == DiagnosticStatus.WARN
+    proxy.clear()                                     # the operator raises max_document_size
+    with open_store(direct) as store:
+        assert import_quarantine(quarantine, store) == (1, 0)
+        assert [m.message().data for m in store.find_messages(topic="/notes")][-1] == big.data
+    sender.close()
+    notes.unregister()
+
+
+@pytest.mark.ros
+def test_writer_failure_is_reported_and_the_writer_restarted(couchdb_server, proxy, roslaunch, tmp_path,
+                                                             diagnostics):
+    name = _names()
+    recorder(roslaunch, proxy.database_url(name), tmp_path)
+    sender = Sender().connected()
+    sender.send(50)
+    wait_until(lambda: diagnostics.count("stored") == 50, 60, what="50 stored")
+    proxy.set(bulk_answer="[null]")                   # a 201 whose body has an unexpected shape
+    sender.send(100)
+    wait_until(lambda: diagnostics.count("writer_restarts") >= 1, 60, what="a writer restart")
+    wait_until(lambda: diagnostics.level == DiagnosticStatus.ERROR, 90, what="ERROR on /diagnostics")
+    assert any("restarted" in message for _, message in diagnostics.levels)
+    proxy.clear()
+    wait_until(lambda: diagnostics.count("stored") == 150 and diagnostics.count("spool_pending") == 0, 90,
+               what="every message stored after the restart")
+    assert stored_xs(f"{couchdb_server.url}/{name}") == [float(i) for i in range(150)]
+    sender.send(50)                                   # the restarted writers keep recording
+    wait_until(lambda: diagnostics.count("stored") == 200, 60, what="200 stored")
+    assert diagnostics.count("dropped") == 0
+    sender.close()
+
+
+
+# -- TLS with a private CA and a client certificate (the proxy serves HTTPS) --------------------------
+def _openssl(*args, cwd):
+    subprocess.run(["openssl", *args], cwd=cwd, check=True, capture_output=True, timeout=120)
+
+
+@pytest.fixture
+def private_ca(tmp_path):
+    """A private CA, a server certificate for 127.0.0.1 and a client certificate (real openssl)."""
+    d = tmp_path / "pki"
+    d.mkdir()
+    _openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out", "ca.pem",
+             "-days", "2", "-subj", "/CN=robot test CA", cwd=d)
+    (d / "san.ext").write_text("subjectAltName=IP:127.0.0.1\n")
+    for who, extra in (("server", ["-extfile", "san.ext"]), ("client", [])):
+        _openssl("req", "-newkey", "rsa:2048", "-nodes", "-keyout", f"{who}.key", "-out", f"{who}.csr",
+                 "-subj", f"/CN={who}", cwd=d)
+        _openssl("x509", "-req", "-in", f"{who}.csr", "-CA", "ca.pem", "-CAkey", "ca.key", "-CAcreateserial",
+                 "-out", f"{who}.pem", "-days", "2", *extra, cwd=d)
+    return d
+
+
+def test_tls_with_a_private_ca_and_a_client_certificate(couchdb_server, private_ca, tmp_path):
+    tls = {"cert": str(private_ca / "server.pem"), "key": str(private_ca / "server.key"),
+           "client_ca": str(private_ca / "ca.pem")}
+    with FaultProxy(couchdb_server.url, tmp_path, tls=tls) as proxy:
+        url = proxy.database_url(_names())
+        assert url.startswith("https://")
+        with pytest.raises(StoreRefused, match="TLS"):        # the system CAs do not know this one
+            open_store(url)
+        with pytest.raises(StoreError):                        # the server wants a client certificate
+            open_store(url, tls_ca_file=str(private_ca / "ca.pem"))
+        options = {"tls_ca_file": str(private_ca / "ca.pem"), "tls_cert_file": str(private_ca / "client.pem"),
+                   "tls_key_file": str(private_ca / "client.key")}
+        with open_store(url, **options) as store:
+            store.put_topic(TopicInfo.of_class("/chatter", String))
+            assert store.insert_records(_records(20)) == 20
+            assert [m.message().data for m in store.find_messages()] == [f"m{i}" for i in range(20)]

@@ -1,0 +1,308 @@
+"""Fleet replication as users run it: robots record locally and push to a central CouchDB database.
+
+Real processes only: one pouchdb-server per robot plus a central one (ros_harness), real roscores
+(one per robot, as on real robots) and the nodes through roslaunch (launch/fleet.launch). Counts
+and ids are read from the stores, never built here.
+"""
+import json
+import sys
+import uuid
+from pathlib import Path
+
+import pytest
+import requests
+import rospy
+from diagnostic_msgs.msg import DiagnosticArray
+from nav_msgs.msg import Odometry
+from std_srvs.srv import Trigger
+
+from ros_harness import LaunchSet, ManagedProcess, PouchDBServer, RosCore, wait_until
+from ros_mongo.replication import CouchDatabase, ReplicationError, ReplicationSpec
+from ros_mongo.retention import Retention
+
+HERE = Path(__file__).resolve().parent
+LONG = 300.0  # seconds: generous, the machine is busy
+
+
+def all_docs(db_url):
+    """Every document of a database (attachment stubs only), with `_conflicts` where any."""
+    docs, start = [], None
+    while True:
+        params = {"include_docs": "true", "conflicts": "true", "limit": "501"}
+        if start is not None:
+            params["startkey"] = json.dumps(start)
+        rows = requests.get(db_url + "/_all_docs", params=params, timeout=60).json()["rows"]
+        docs += [row["doc"] for row in rows[:500]]
+        if len(rows) <= 500:
+            return docs
+        start = rows[500]["id"]
+
+
+def messages(docs):
+    return [d for d in docs if d.get("kind") == "message"]
+
+
+def content(doc):
+    """What a message is, read from its stored fields: (robot, topic, index sent in frame_id)."""
+    return doc["robot_id"], doc["topic"], int(doc["msg"]["header"]["frame_id"])
+
+
+def count_messages(db_url):
+    try:
+        return len(messages(all_docs(db_url)))
+    except (requests.RequestException, ValueError, KeyError):
+        return -1
+
+
+def robot_counts(db_url):
+    try:
+        found = {}
+        for doc in messages(all_docs(db_url)):
+            found[doc["robot_id"]] = found.get(doc["robot_id"], 0) + 1
+        return found
+    except (requests.RequestException, ValueError, KeyError):
+        return {}
+
+
+# -- the selector and retention (real servers, no ROS) ---------------------------------------
+
+def test_selector_keeps_design_docs_tombstones_and_local_topics_home():
+    spec = ReplicationSpec(local_topics=("/camera/rgb/image_raw",))
+    assert spec.selector() == {"kind": {"$in": ["message", "topic"]},
+                               "topic": {"$nin": ["/camera/rgb/image_raw"]}}
+    assert spec.selects({"_id": "m", "kind": "message", "topic": "/odom"})
+    assert spec.selects({"_id": "t", "kind": "topic", "topic": "/odom"})
+    assert not spec.selects({"_id": "_design/idx", "views": {}})
+    assert not spec.selects({"_id": "m", "_deleted": True})
+    assert not spec.selects({"_id": "i", "kind": "message", "topic": "/camera/rgb/image_raw"})
+    only = ReplicationSpec(topics=("/odom",))
+    assert not only.selects({"_id": "s", "kind": "message", "topic": "/scan"})
+    with pytest.raises(ReplicationError, match="'odom'"):
+        ReplicationSpec(topics=("odom",))
+    with pytest.raises(ReplicationError, match="/odom"):
+        ReplicationSpec(topics=("/odom",), local_topics=("/odom",))
+
+
+def _put(db_url, doc):
+    response = requests.put(f"{db_url}/{doc['_id']}", json=doc, timeout=30)
+    assert response.status_code == 201, response.text
+    return response.json()["rev"]
+
+
+@pytest.mark.db
+def test_retention_deletes_only_old_documents_central_holds(tmp_path):
+    with PouchDBServer(tmp_path / "robot") as robot, PouchDBServer(tmp_path / "central") as central:
+        local_url, central_url = robot.database_url("robot_data"), central.database_url("fleet")
+        for url in (local_url, central_url):
+            assert requests.put(url, timeout=30).status_code == 201
+        now = 1_000_000.0
+        old, new = now - 3600, now - 10
+        docs = {
+            "old-central": {"kind": "message", "topic": "/odom", "receive_time": old},
+            "old-missing": {"kind": "message", "topic": "/odom", "receive_time": old},
+            "old-other-rev": {"kind": "message", "topic": "/odom", "receive_time": old},
+            "new-central": {"kind": "message", "topic": "/odom", "receive_time": new},
+            "old-local-topic": {"kind": "message", "topic": "/camera", "receive_time": old},
+            "old-undated": {"kind": "message", "topic": "/odom"},
+            "topic-odom": {"kind": "topic", "topic": "/odom"},
+        }
+        revs = {doc_id: _put(local_url, dict(body, _id=doc_id)) for doc_id, body in docs.items()}
+        # central holds these with the very same revision (new_edits=false keeps the revision)
+        same = [dict(docs[i], _id=i, _rev=revs[i]) for i in
+                ("old-central", "new-central", "old-local-topic", "old-undated", "topic-odom")]
+        answer = requests.post(central_url + "/_bulk_docs", json={"docs": same, "new_edits": False},
+                               timeout=30)
+        assert answer.status_code == 201, answer.text
+        _put(central_url, dict(docs["old-other-rev"], _id="old-other-rev", note="other"))
+
+        retention = Retention(CouchDatabase(local_url), CouchDatabase(central_url),
+                              ReplicationSpec(local_topics=("/camera",)), older_than=600,
+                              page=2, clock=lambda: now)
+        result = retention.run_once()
+        assert result.deleted == 1
+        remaining = {d["_id"] for d in all_docs(local_url)}
+        assert remaining == set(docs) - {"old-central"}
+        assert requests.get(local_url + "/old-central", timeout=30).status_code == 404
+        assert result.kept_unconfirmed == 2  # old-missing, old-other-rev
+        # central still has everything it had; nothing was deleted there
+        assert {d["_id"] for d in all_docs(central_url)} == {
+            "old-central", "new-central", "old-local-topic", "old-undated", "topic-odom",
+            "old-other-rev"}
+        with pytest.raises(ReplicationError, match="-5"):
+            Retention(CouchDatabase(local_url), CouchDatabase(central_url), ReplicationSpec(),
+                      older_than=-5)
+
+
+# -- one robot: diagnostics and services -------------------------------------------------------
+
+class ReplicatorStatus:
+    def __init__(self, robot_id):
+        self.name = f"ros_mongo_replicator: {robot_id}"
+        self.values, self.level = {}, None
+        self.subscriber = rospy.Subscriber("/diagnostics", DiagnosticArray, self._receive)
+
+    def _receive(self, msg):
+        for status in msg.status:
+            if status.name == self.name:
+                self.values = {kv.key: kv.value for kv in status.values}
+                self.level = status.level
+
+    def get(self, key, default=""):
+        return self.values.get(key, default)
+
+
+@pytest.mark.ros
+@pytest.mark.db
+def test_replicator_reports_lag_and_obeys_start_stop_trigger(roslaunch, rospy_node, workspace_root,
+                                                             tmp_path):
+    robot_id = f"robot_{uuid.uuid4().hex[:6]}"
+    with PouchDBServer(tmp_path / "robot") as robot, PouchDBServer(tmp_path / "central") as central:
+        central_url = central.database_url("fleet")
+        status = ReplicatorStatus(robot_id)
+        launch = roslaunch(str(workspace_root / "launch" / "fleet.launch"), central_url=central_url,
+                           robot_id=robot_id, local_db="false", local_db_port=robot.port,
+                           topics="[/odom]", spool_path=str(tmp_path / "spool"))
+        launch.wait_for_services(["/ros_mongo_replicator/stop", "/ros_mongo_replicator/start",
+                                  "/ros_mongo_replicator/trigger"], timeout=LONG)
+        wait_until(lambda: status.get("state") == "running", LONG, what="replication running")
+        publisher = rospy.Publisher("/odom", Odometry, queue_size=1000)
+        wait_until(lambda: publisher.get_num_connections() > 0, LONG, what="recorder subscribed")
+
+        def send(first, count):
+            for index in range(first, first + count):
+                msg = Odometry()
+                msg.header.frame_id = str(index)
+                publisher.publish(msg)
+                rospy.sleep(0.01)  # the publisher's pace, not synchronisation
+
+        send(0, 20)
+        wait_until(lambda: count_messages(central_url) == 20, LONG, what="20 messages central")
+        wait_until(lambda: status.get("pending_docs") == "0", LONG, what="nothing pending")
+
+        stop = rospy.ServiceProxy("/ros_mongo_replicator/stop", Trigger)()
+        assert stop.success, stop.message
+        wait_until(lambda: status.get("state") == "stopped", LONG, what="state stopped")
+        send(20, 30)
+        wait_until(lambda: count_messages(robot.database_url("robot_data")) == 50, LONG,
+                   what="50 messages in the robot's store")
+        wait_until(lambda: int(status.get("lag_docs", "0")) >= 30, LONG, what="lag of 30 documents")
+        assert float(status.get("lag_seconds")) > 0
+        assert status.level == 1  # WARN: stopped by request
+        assert count_messages(central_url) == 20  # nothing went up while stopped
+
+        start = rospy.ServiceProxy("/ros_mongo_replicator/start", Trigger)()
+        assert start.success, start.message
+        wait_until(lambda: count_messages(central_url) == 50, LONG, what="50 messages central")
+        wait_until(lambda: status.get("pending_docs") == "0", LONG, what="caught up")
+        trigger = rospy.ServiceProxy("/ros_mongo_replicator/trigger", Trigger)()
+        assert trigger.success, trigger.message
+        assert status.get("central") == central_url
+        assert status.get("last_error") == ""
+        status.subscriber.unregister()
+        publisher.unregister()
+
+
+# -- three robots, central and local outages ---------------------------------------------------
+
+class Robot:
+    """One robot: its own roscore, local store and fleet.launch."""
+
+    def __init__(self, index, work: Path, central_url, workspace_root):
+        self.robot_id = f"robot{index}"
+        self.work = work / self.robot_id
+        self.core = RosCore(log_dir=self.work / "ros").start()
+        self.store = PouchDBServer(self.work / "store").start()
+        self.url = self.store.database_url("robot_data")
+        self.launches = LaunchSet(self.core, self.work / "launch")
+        self.launch = self.launches(str(workspace_root / "launch" / "fleet.launch"),
+                                    central_url=central_url, robot_id=self.robot_id,
+                                    local_db="false", local_db_port=self.store.port,
+                                    topics="[/odom, /camera/rgb/image_raw]",
+                                    spool_path=str(self.work / "recorder.spool"))
+        self.publisher = None
+
+    def publish(self, count, rate, hold_at):
+        self.go_file = self.work / "go"
+        self.publisher = ManagedProcess(
+            [sys.executable, str(HERE / "fleet_publisher.py"), "--count", count, "--rate", rate,
+             "--hold-at", hold_at, "--go-file", self.go_file],
+            name=f"publisher {self.robot_id}", log_path=self.work / "publisher.log",
+            env=self.core.env()).start()
+
+    def published(self):
+        for line in self.publisher.log_path.read_text().splitlines():
+            if line.startswith("{"):
+                return json.loads(line)["published"]
+        raise AssertionError(f"no counts from the publisher: {self.publisher.log_tail()}")
+
+    def close(self):
+        if self.publisher is not None:
+            self.publisher.stop()
+        self.launches.stop_all()
+        self.core.stop()
+        self.store.stop()
+
+
+@pytest.mark.ros
+@pytest.mark.db
+def test_three_robots_each_message_central_exactly_once_through_outages(tmp_path, workspace_root):
+    count, rate = 400, 40.0
+    central = PouchDBServer(tmp_path / "central").start()
+    robots = []
+    try:
+        robots = [Robot(i, tmp_path, central.database_url("fleet"), workspace_root) for i in (1, 2, 3)]
+        central_url = central.database_url("fleet")
+        wait_until(lambda: requests.get(central_url, timeout=5).ok, LONG, what="central database")
+        for robot in robots:
+            robot.launch.wait_for_subscribers(["/odom", "/camera/rgb/image_raw"], timeout=LONG)
+            robot.publish(count, rate, hold_at=100)
+
+        # mid-stream: every robot has replicated some messages, then the central server stops
+        wait_until(lambda: all(robot_counts(central_url).get(r.robot_id, 0) >= 40 for r in robots),
+                   LONG, what="40 messages of each robot central")
+        central.stop()
+        held = {r.robot_id: count_messages(r.url) for r in robots}
+        for robot in robots:
+            robot.go_file.touch()  # the rest of the stream comes while central is down
+        wait_until(lambda: all(count_messages(r.url) >= held[r.robot_id] + 60 for r in robots),
+                   LONG, what="recording goes on while central is down")
+        # a robot's local store restarts mid-replication (the recorder spools meanwhile)
+        robots[0].store.restart()
+        central.start()
+
+        wait_until(lambda: not any(r.publisher.alive for r in robots), LONG, what="all published")
+        published = {r.robot_id: r.published() for r in robots}
+        expected = sum(sum(p.values()) for p in published.values())
+        wait_until(lambda: count_messages(central_url) == expected, LONG,
+                   what=f"{expected} messages central")
+
+        central_docs = all_docs(central_url)
+        assert [d["_id"] for d in central_docs if d.get("_conflicts")] == []
+        central_revs = {d["_id"]: d["_rev"] for d in central_docs}
+        local_total = 0
+        for robot in robots:
+            local = all_docs(robot.url)
+            local_messages = messages(local)
+            local_total += len(local_messages)
+            # the robot recorded every message it was sent (local store restart included)
+            seqs = sorted(content(d)[1:] for d in local_messages)
+            sent = published[robot.robot_id]
+            assert sent == {"/odom": count, "/camera/rgb/image_raw": count // 10}
+            assert seqs == sorted([("/odom", i) for i in range(count)]
+                                  + [("/camera/rgb/image_raw", i) for i in range(0, count, 10)])
+            # central holds each of the robot's documents with the same revision
+            for doc in local:
+                if doc.get("kind") in ("message", "topic"):
+                    assert central_revs.get(doc["_id"]) == doc["_rev"], doc["_id"]
+        # each message exactly once, by content
+        contents = [content(d) for d in messages(central_docs)]
+        assert len(contents) == len(set(contents)) == expected == local_total
+        assert {c[0] for c in contents} == {r.robot_id for r in robots}
+        # images arrived with their bytes (attachments)
+        image = next(d for d in messages(central_docs) if d["topic"] == "/camera/rgb/image_raw")
+        raw = requests.get(f"{central_url}/{image['_id']}/raw", timeout=30)
+        assert raw.status_code == 200 and len(raw.content) == image["size"]
+    finally:
+        for robot in robots:
+            robot.close()
+        central.stop()
