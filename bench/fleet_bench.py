@@ -229,13 +229,7 @@ def run_replicated(work: Path, robots_n: int, duration: float, partition: float,
         wait_until(lambda: not any(r.publisher.alive for r in robots), total + 600,
                    what="publishers done")
         published = sum(r.published() for r in robots)
-        last_change, last_count = time.time(), -1
-        while watch.count() < published and time.time() - last_change < 120:
-            time.sleep(2)
-            if watch.count() != last_count:
-                last_change, last_count = time.time(), watch.count()
-            _progress("draining", watch, published)
-        watch.stop()
+        _drain(watch, published, "draining")
         arrivals = list(watch.arrivals.values())
         steady = [a - r for a, r, _, _ in arrivals if t0 + 5 <= r < t_cut]
         before_heal = [a for a, r, _, _ in arrivals if r < t_heal]
@@ -261,6 +255,18 @@ def run_replicated(work: Path, robots_n: int, duration: float, partition: float,
         central.stop()
 
 
+def _drain(watch, published: int, label: str) -> None:
+    """Wait until central holds every published message or nothing arrived for 120 s, then stop
+    watching."""
+    last_change, last_count = time.time(), -1
+    while watch.count() < published and time.time() - last_change < 120:
+        time.sleep(2)
+        if watch.count() != last_count:
+            last_change, last_count = time.time(), watch.count()
+        _progress(label, watch, published)
+    watch.stop()
+
+
 def run_direct(work: Path, robots_n: int, duration: float):
     central = PouchDBServer(work / "central_direct").start()
     central_url = central.database_url("fleet")
@@ -276,13 +282,7 @@ def run_direct(work: Path, robots_n: int, duration: float):
         wait_until(lambda: not any(r.publisher.alive for r in robots), duration + 600,
                    what="publishers done")
         published = sum(r.published() for r in robots)
-        last_change, last_count = time.time(), -1
-        while watch.count() < published and time.time() - last_change < 120:
-            time.sleep(2)
-            if watch.count() != last_count:
-                last_change, last_count = time.time(), watch.count()
-            _progress("direct", watch, published)
-        watch.stop()
+        _drain(watch, published, "direct")
         arrivals = list(watch.arrivals.values())
         lags = [a - r for a, r, _, _ in arrivals if r >= t0 + 5]
         first, last = min(a for a, *_ in arrivals), max(a for a, *_ in arrivals)
