@@ -6,8 +6,9 @@ Variants (each: top-1 / top-3 on the dev half, the held-out test half and all qu
 - WordNet lexical: WordNet-expanded labels, exact word matches only (no vectors);
 - the sentence backend (all-MiniLM-L6-v2, the product default), in this process:
   names/phrase (cosine of the phrase's and the label name's vectors), expanded/phrase (label
-  name + its WordNet words as one text, numbers matched exactly: the product default), the same
-  with numbers as text only, and the word-level method of the
+  name + its WordNet words as one text, numbers matched exactly: the default before issue 18),
+  that + the bare-name share and the name-spelling stage (issue 18: the product default), the
+  same without them with numbers as text only, and the word-level method of the
   word2vec backend run on the sentence model's word vectors (expanded/align+spelling+hubness);
 - word2vec on Brown, on WordNet glosses, on Brown + glosses (the fallback), each with
   names/mean (the original approach: cosine of mean vectors of the label-name words),
@@ -15,7 +16,10 @@ Variants (each: top-1 / top-3 on the dev half, the held-out test half and all qu
   expanded/align+spelling (labels expanded with WordNet synonyms, related words, definitions),
   ... +query expansion (query words also matched through their WordNet words),
   ... +hubness (each label's mean match with the other labels' words subtracted: the word2vec
-  default), and that with raw vectors (no common-direction removal).
+  default before issue 18), that with raw vectors (no common-direction removal), and
+  ... +hubness + name share (half the score on the bare names: the word2vec default).
+Variants before issue 18 keep their settings (name_text_weight / name_spelling_weight 0). Since
+issue 18 all of region_eval.yaml is a dev set (its test half's figures are no longer held out).
 Also: word2vec training time, and each backend's load time in a fresh process (imports included).
 
     python bench/nlp_region_accuracy.py [--quick] [--brown PATH] [--retrain]
@@ -27,10 +31,21 @@ Writes artifacts/bench/nlp_region_accuracy.json and nlp_region_accuracy.png.
 The two shipped configurations only, as the nodes run them (the sentence backend with the phrase
 method; word2vec with `source` auto, i.e. what a robot without PyTorch gets: Brown + WordNet
 glosses when a Brown corpus is found (NLTK's places or --brown), else the glosses alone; word
-method with WordNet labels and hubness), on test queries never used for a choice:
-bench/data/region_eval_real.yaml (phrases over the labels of a real floor, all test) and the
-held-out test half of region_eval.yaml, each and pooled, top-1 / top-3 with 95% Wilson intervals.
-Writes artifacts/bench/nlp_region_accuracy_shipped.json and .png.
+method with WordNet labels and hubness), on the held-out test set
+bench/data/region_test_real.yaml (149 phrases over the labels of a real floor, never used for a
+choice), top-1 / top-3 with 95% Wilson intervals; also on the dev sets, marked as such.
+Writes artifacts/bench/nlp_region_accuracy_shipped.json and .png (the test rows).
+
+    python bench/nlp_region_accuracy.py --dev [--cache-dir DIR]
+
+Issue 18's choice of settings, on the dev sets only (nlp_common.load_dev_sets: the earlier 40
+real-floor phrases and all of region_eval.yaml): a grid of the sentence phrase method's
+name_text_weight x name_spelling_weight, and of the word method's name_text_weight (it matches
+names by spelling already); the best by pooled dev top-1 (ties: top-3, then the smaller
+weights) is what the code ships. Writes artifacts/bench/nlp_region_accuracy_dev.json.
+`--shipped` then reports the shipped settings on the held-out test set
+bench/data/region_test_real.yaml (149 phrases, never used for a choice), with the settings before
+issue 18 for comparison, and on the dev sets (marked as such).
 """
 import argparse
 import json
@@ -43,8 +58,10 @@ from pathlib import Path
 from nlp_common import (
     BROWN_ZIP,
     OUT_DIR,
+    REAL_TEST_FILE,
     evaluate,
     fresh_process_load_seconds,
+    load_dev_sets,
     load_eval,
     load_real_eval,
     wilson,
@@ -59,8 +76,10 @@ from region_search.sentence import load_sentence_model
 from region_search.text_similarity import content_words, string_baseline_score, tokenize
 from region_search.training import Word2VecParams, load_embeddings
 
-PRODUCT = "sentence expanded/phrase"
-FALLBACK = "brown+wordnet expanded/align+spelling+hubness"
+PRODUCT = "sentence expanded/phrase + name share + name spelling"
+FALLBACK = "brown+wordnet expanded/align+spelling+hubness + name share"
+# The variants measured before issue 18 keep their settings (no bare-name share or spelling).
+BEFORE = {"name_text_weight": 0.0}
 
 
 def recommender_ranker(recommender: RegionRecommender):
@@ -81,12 +100,15 @@ def embedding_variants(embeddings, wordnet, raw):
         "names/mean": RegionRecommender(embed, use_spelling=False, method="mean"),
         "names/align": RegionRecommender(embed, use_spelling=False),
         "names/align+spelling": RegionRecommender(embed),
-        "expanded/align+spelling": RegionRecommender(embed, wordnet=wordnet),
-        "expanded/align+spelling+query expansion": RegionRecommender(embed, wordnet=wordnet,
-                                                                     expand_query=True),
-        "expanded/align+spelling+hubness": RegionRecommender(embed, wordnet=wordnet, hubness=True),
+        "expanded/align+spelling": RegionRecommender(embed, wordnet=wordnet, **BEFORE),
+        "expanded/align+spelling+query expansion": RegionRecommender(
+            embed, wordnet=wordnet, expand_query=True, **BEFORE),
+        "expanded/align+spelling+hubness": RegionRecommender(embed, wordnet=wordnet, hubness=True,
+                                                             **BEFORE),
         "expanded/align+spelling+hubness, raw vectors": RegionRecommender(
-            raw.embed_words, wordnet=wordnet, hubness=True),
+            raw.embed_words, wordnet=wordnet, hubness=True, **BEFORE),
+        "expanded/align+spelling+hubness + name share": RegionRecommender(
+            embed, wordnet=wordnet, hubness=True),
     }
 
 
@@ -95,13 +117,16 @@ def sentence_variants(wordnet):
     start = time.monotonic()
     sentence = load_sentence_model()
     load_seconds = time.monotonic() - start
+    before = {"name_text_weight": 0.0, "name_spelling_weight": 0.0}
     variants = {
-        "sentence names/phrase": PhraseRegionRecommender(sentence.embed_phrases),
+        "sentence names/phrase": PhraseRegionRecommender(sentence.embed_phrases, **before),
         "sentence expanded/phrase, numbers as text only": PhraseRegionRecommender(
-            sentence.embed_phrases, wordnet=wordnet, number_weight=0.0),
+            sentence.embed_phrases, wordnet=wordnet, number_weight=0.0, **before),
+        "sentence expanded/phrase": PhraseRegionRecommender(sentence.embed_phrases,
+                                                            wordnet=wordnet, **before),
         PRODUCT: PhraseRegionRecommender(sentence.embed_phrases, wordnet=wordnet),
         "sentence expanded/align+spelling+hubness (word level)": RegionRecommender(
-            sentence.embed_words, wordnet=wordnet, hubness=True),
+            sentence.embed_words, wordnet=wordnet, hubness=True, **BEFORE),
     }
     return sentence, load_seconds, variants
 
@@ -116,6 +141,8 @@ def main() -> int:
     parser.add_argument("--shipped", action="store_true",
                         help="only the two shipped configurations, on the held-out test sets, "
                              "with 95%% Wilson intervals")
+    parser.add_argument("--dev", action="store_true",
+                        help="choose the issue-18 settings on the dev sets (a grid)")
     parser.add_argument("--with-brown", action="store_true",
                         help="--shipped: word2vec auto with --brown (default: only a Brown corpus "
                              "found where NLTK looks, as the nodes' default brown_path '')")
@@ -124,6 +151,8 @@ def main() -> int:
     args = parser.parse_args()
     if args.shipped:
         return shipped(args)
+    if args.dev:
+        return dev_choice(args)
     buildings = load_eval()
     n_queries = sum(len(b["queries"]) for b in buildings.values())
     print(f"evaluation set: {n_queries} queries over {len(buildings)} buildings "
@@ -166,41 +195,59 @@ def main() -> int:
     return 0
 
 
-def shipped(args) -> int:
-    """The shipped configurations on the test queries (see the module docstring)."""
-    wordnet = WordNet()
-    real = load_real_eval()
-    held_out = {name: dict(building, queries=[q for q in building["queries"] if q["split"] == "test"])
-                for name, building in load_eval().items()}
-    sets = {"real floor (Towne/Levine labels)": real, "region_eval.yaml test half": held_out}
+def summarize(rows) -> dict:
+    """n, top-1 / top-3 and their 95% Wilson intervals of evaluated query rows."""
+    hits1, hits3 = sum(r["top1_ok"] for r in rows), sum(r["top3_ok"] for r in rows)
+    return {"n": len(rows), "top1": hits1 / len(rows), "top3": hits3 / len(rows),
+            "top1_hits": hits1, "top3_hits": hits3, "top1_ci95": wilson(hits1, len(rows)),
+            "top3_ci95": wilson(hits3, len(rows))}
+
+
+def shipped_recommenders(args, wordnet):
+    """{name: recommender} of the two shipped configurations (the nodes' defaults) and the
+    word2vec load info."""
     sentence = load_sentence_model()
     brown = args.brown if args.with_brown else ""  # "": where NLTK looks, as the nodes do
     embeddings, info = load_embeddings("auto", brown_path=brown, params=Word2VecParams(),
                                        cache_dir=args.cache_dir or None, progress=True)
+    word2vec = f"word2vec auto = {'+'.join(info['corpora'])} (word method)"
     configs = {
         "sentence (phrase method)": PhraseRegionRecommender(sentence.embed_phrases, wordnet=wordnet),
-        f"word2vec auto = {'+'.join(info['corpora'])} (word method)": RegionRecommender(
-            embeddings.embed_words, wordnet=wordnet, hubness=True),
+        word2vec: RegionRecommender(embeddings.embed_words, wordnet=wordnet, hubness=True),
+        # For comparison only (nothing is chosen from them): the settings before issue 18.
+        "sentence, before issue 18": PhraseRegionRecommender(
+            sentence.embed_phrases, wordnet=wordnet, name_text_weight=0.0,
+            name_spelling_weight=0.0),
+        f"{word2vec.split(' (')[0]}, before issue 18": RegionRecommender(
+            embeddings.embed_words, wordnet=wordnet, hubness=True, name_text_weight=0.0),
     }
+    return configs, info, sentence
+
+
+def shipped(args) -> int:
+    """The shipped configurations on the held-out test set (see the module docstring)."""
+    wordnet = WordNet()
+    configs, info, sentence = shipped_recommenders(args, wordnet)
+    sets = {"held-out test: real floor, region_test_real.yaml": load_real_eval(REAL_TEST_FILE)}
+    sets.update({f"dev (settings chosen here): {name}": buildings
+                 for name, buildings in load_dev_sets().items()})
     table, rows = {}, {}
     for config, recommender in configs.items():
         ranker = recommender_ranker(recommender)
         for name, buildings in sets.items():
-            result = evaluate(ranker, buildings)
-            table[(config, name)] = result["summary"]["test"]
-            rows[(config, name)] = result["queries"]
-        pooled = rows[(config, list(sets)[0])] + rows[(config, list(sets)[1])]
-        hits1, hits3 = sum(r["top1_ok"] for r in pooled), sum(r["top3_ok"] for r in pooled)
-        table[(config, "pooled")] = {
-            "n": len(pooled), "top1": hits1 / len(pooled), "top3": hits3 / len(pooled),
-            "top1_hits": hits1, "top3_hits": hits3, "top1_ci95": wilson(hits1, len(pooled)),
-            "top3_ci95": wilson(hits3, len(pooled))}
-    print(f"\n{'configuration':44s} {'test set':34s} {'n':>3s}  {'top-1 (95% CI)':>20s}  "
+            rows[(config, name)] = evaluate(ranker, buildings)["queries"]
+            table[(config, name)] = summarize(rows[(config, name)])
+    print(f"\n{'configuration':44s} {'set':60s} {'n':>3s}  {'top-1 (95% CI)':>20s}  "
           f"{'top-3 (95% CI)':>20s}")
     for (config, name), s in table.items():
         cells = [f"{s[k]:4.0%} ({s[k + '_ci95'][0]:3.0%}-{s[k + '_ci95'][1]:4.0%})"
                  for k in ("top1", "top3")]
-        print(f"{config:44s} {name:34s} {s['n']:3d}  {cells[0]:>20s}  {cells[1]:>20s}")
+        print(f"{config:44s} {name:60s} {s['n']:3d}  {cells[0]:>20s}  {cells[1]:>20s}")
+    cpu = cpu_per_query(configs, sets)
+    print("\nin-process CPU time per recommendation (all the sets' phrases, configurations "
+          f"interleaved, load average {os.getloadavg()[0]:.1f}):")
+    for config, figures in cpu.items():
+        print(f"  {config:44s} p50 {figures['p50_ms']:6.2f} ms  p99 {figures['p99_ms']:6.2f} ms")
     for (config, name), queries in rows.items():
         misses = [r for r in queries if not r["top1_ok"]]
         print(f"\n{config}, {name}: {len(misses)} top-1 misses")
@@ -209,10 +256,81 @@ def shipped(args) -> int:
     path = write_json("nlp_region_accuracy_shipped", {
         "table": [dict(config=c, set=n, **s) for (c, n), s in table.items()],
         "queries": [dict(config=c, set=n, **r) for (c, n), q in rows.items() for r in q],
-        "word2vec": {k: info[k] for k in ("corpora", "path", "cache_hit")},
+        "word2vec": {k: info[k] for k in ("corpora", "path", "cache_hit")}, "cpu_per_query": cpu,
         "sentence": sentence.description, "load_average": os.getloadavg()})
-    plot_shipped(table, OUT_DIR / "nlp_region_accuracy_shipped.png")
+    plot_shipped({k: v for k, v in table.items() if k[1].startswith("held-out")},
+                 OUT_DIR / "nlp_region_accuracy_shipped.png")
     print(f"\nwrote {path} and {OUT_DIR / 'nlp_region_accuracy_shipped.png'}")
+    return 0
+
+
+def cpu_per_query(configs, sets) -> dict:
+    """{config: {"p50_ms", "p99_ms", "n"}}: process CPU time of recommend(phrase, 3) over every
+    phrase of the sets (labels set first), the configurations interleaved so that they share the
+    machine's load alike."""
+    import numpy as np
+
+    times = {config: [] for config in configs}
+    for buildings in sets.values():
+        for building in buildings.values():
+            regions = [Region(name, 0.0, 0.0) for name in building["labels"]]
+            for recommender in configs.values():
+                recommender.set_regions(regions)
+            for query in building["queries"]:
+                for config, recommender in configs.items():
+                    start = time.process_time()
+                    recommender.recommend(query["phrase"], 3)
+                    times[config].append(time.process_time() - start)
+    return {config: {"p50_ms": 1e3 * float(np.percentile(values, 50)),
+                     "p99_ms": 1e3 * float(np.percentile(values, 99)), "n": len(values)}
+            for config, values in times.items()}
+
+
+# The grids of issue 18's settings (chosen on the dev sets only).
+NAME_TEXT_WEIGHTS = (0.0, 0.3, 0.5, 0.7, 1.0)
+NAME_SPELLING_WEIGHTS = (0.0, 0.2, 0.3, 0.5, 0.8)
+
+
+def dev_choice(args) -> int:
+    """Grid of the issue-18 settings on the dev sets; prints and writes the best of each method."""
+    wordnet = WordNet()
+    sets = load_dev_sets()
+    sentence = load_sentence_model()
+    embeddings, info = load_embeddings("auto", params=Word2VecParams(),
+                                       cache_dir=args.cache_dir or None, progress=True)
+    candidates = {}
+    for text_weight in NAME_TEXT_WEIGHTS:
+        for spelling_weight in NAME_SPELLING_WEIGHTS:
+            candidates[("sentence", text_weight, spelling_weight)] = PhraseRegionRecommender(
+                sentence.embed_phrases, wordnet=wordnet, name_text_weight=text_weight,
+                name_spelling_weight=spelling_weight)
+    for text_weight in NAME_TEXT_WEIGHTS:
+        candidates[("word2vec", text_weight, 0.0)] = RegionRecommender(
+            embeddings.embed_words, wordnet=wordnet, hubness=True, name_text_weight=text_weight)
+    results = []
+    for key, recommender in candidates.items():
+        ranker = recommender_ranker(recommender)
+        per_set = {name: evaluate(ranker, buildings)["queries"] for name, buildings in sets.items()}
+        pooled = summarize([r for rows in per_set.values() for r in rows])
+        results.append({"method": key[0], "name_text_weight": key[1],
+                        "name_spelling_weight": key[2], "pooled": pooled,
+                        "sets": {name: summarize(rows) for name, rows in per_set.items()}})
+        cells = "  ".join(f"{summarize(rows)['top1']:4.0%}/{summarize(rows)['top3']:4.0%}"
+                          for rows in per_set.values())
+        print(f"{key[0]:9s} name_text {key[1]:.1f} name_spelling {key[2]:.1f}: {cells}  pooled "
+              f"top-1 {pooled['top1']:.1%} top-3 {pooled['top3']:.1%}", flush=True)
+    chosen = {}
+    for method in ("sentence", "word2vec"):
+        ranked = sorted((r for r in results if r["method"] == method), key=lambda r: (
+            -r["pooled"]["top1"], -r["pooled"]["top3"], r["name_spelling_weight"],
+            r["name_text_weight"]))
+        chosen[method] = ranked[0]
+        print(f"chosen for {method}: name_text_weight {ranked[0]['name_text_weight']}, "
+              f"name_spelling_weight {ranked[0]['name_spelling_weight']} (dev top-1 "
+              f"{ranked[0]['pooled']['top1']:.1%})")
+    path = write_json("nlp_region_accuracy_dev", {
+        "sets": list(sets), "word2vec": info["corpora"], "results": results, "chosen": chosen})
+    print(f"\nwrote {path}")
     return 0
 
 

@@ -3,7 +3,11 @@
 
 1. record: ros_mongo_server against `rosbag record`, both subscribed to the same publishers at the
    same time (1 kHz Odometry, 30 Hz 640x480 rgb8 Image, 40 Hz 1081-beam LaserScan): messages stored
-   per second, drops (published - stored), ratio to rosbag; per database backend.
+   per second, drops (published - stored), ratio to rosbag; per database backend. CPU seconds
+   (user+system, from /proc, sampled every 0.1 s until each process exits) of the recorder, of the
+   database server it writes to and of rosbag record's `record` process, from the start of
+   publishing: totals, per MB published, as multiples of rosbag record's (targets: recorder +
+   server <= 3x, recorder <= 1.5x); peak RSS (VmHWM) of each. `--only-record` runs just this stage.
 2. import: that bag into each database (ros_mongo_bag's import) against the same server's raw
    bulk-insert rate for the same payloads (msgs/s, MB/s, ratio; target >= 0.5).
 3. replay: ros_mongo_retriever against `rosbag play` of the same data: p50/p99 of the inter-message
@@ -36,6 +40,7 @@ from ros_mongo_bench_lib import (  # noqa: E402 - after the path set-up
     BACKENDS,
     TOPICS,
     Arrivals,
+    CpuWatch,
     RecorderWatch,
     bag_counts,
     gap_errors,
@@ -56,8 +61,11 @@ def say(text=""):
     print(text, flush=True)
 
 
-def bench_record(core, url, work, duration, backend):
-    """The recorder and rosbag record on the same publishers at the same time."""
+def bench_record(core, server, work, duration, backend):
+    """The recorder and rosbag record on the same publishers at the same time, with the CPU
+    seconds and peak memory of the recorder, of the database server it writes to and of rosbag
+    record (see `_cpu_figures`)."""
+    url = server.database_url("bench")
     bag = work / f"record_{backend}.bag"
     logs = work / "logs"
     recorder = RosLaunch.node("ros_mongo", "ros_mongo_server", master_uri=core.uri, log_dir=logs,
@@ -69,6 +77,11 @@ def bench_record(core, url, work, duration, backend):
                             log_path=logs / f"rosbag_record_{backend}.log", env=core.env()).start()
     watch = RecorderWatch()
     wait_until(lambda: subscribers_ready(core.uri, TOPICS, 2), 60, what="recorder and rosbag subscribed")
+    cpu = CpuWatch()
+    cpu.add("recorder", recorder.node_pid("/ros_mongo_server"))
+    cpu.add("store", server.process.pid)
+    cpu.add("rosbag", rosbag.pid)
+    cpu.mark("start")
     publisher = subprocess.run([sys.executable, str(PUBLISHER),
                                 "--duration", str(duration), "--wait-subscribers", "2"],
                                capture_output=True, text=True, env=core.env(), timeout=duration + 120)
@@ -88,6 +101,7 @@ def bench_record(core, url, work, duration, backend):
                what="rosbag record to close the bag")
     rosbag.stop(timeout=10)
     watch.close()
+    cpu.close()
     with open_store(url) as store:
         stored = {t: store.count_messages(topic=t, session_id=f"bench_{backend}") for t in TOPICS}
     in_bag = bag_counts(bag)
@@ -106,7 +120,23 @@ def bench_record(core, url, work, duration, backend):
     result["ratio_sustained"] = result["recorder_sustained_per_s"] / rosbag_rate
     result["megabytes"] = bag.stat().st_size / 1e6
     result["recorder_spooled"] = watch.count_at(watch.values, "spooled")
+    result["cpu"] = _cpu_figures(cpu, result["megabytes"])
     return result
+
+
+def _cpu_figures(cpu, megabytes):
+    """CPU seconds (user + system) from the start of publishing until each process exited (the
+    recorder, rosbag) or the recorder exited (the database server, which stays up), total and per
+    MB published, as a multiple of rosbag record's `record` process; peak RSS of each."""
+    seconds = {"recorder": cpu.cpu("recorder", "start"), "store": cpu.cpu("store", "start"),
+               "rosbag_record": cpu.cpu("rosbag", "start", command="record"),
+               "rosbag_all": cpu.cpu("rosbag", "start")}
+    seconds["recorder_and_store"] = seconds["recorder"] + seconds["store"]
+    rosbag = max(seconds["rosbag_record"], 1e-9)
+    return {"seconds": seconds, "per_mb": {k: v / megabytes for k, v in seconds.items()},
+            "x_rosbag_record": {k: v / rosbag for k, v in seconds.items()},
+            "peak_rss_mb": {"recorder": cpu.peak_rss_mb("recorder"), "store": cpu.peak_rss_mb("store"),
+                            "rosbag_record": cpu.peak_rss_mb("rosbag", command="record")}}
 
 
 def bench_fault(core, server, work, fault_seconds, settle=5.0):
@@ -242,6 +272,16 @@ def report(results):
             f"{rec['recorder_drain_seconds_after_publishing']:.1f} s later: sustained "
             f"{rec['recorder_sustained_per_s']:.0f} msgs/s = {rec['ratio_sustained']:.2f} x rosbag "
             f"({rec['megabytes']:.0f} MB published; {rec['recorder_spooled']} went through the spool)")
+        figures = rec["cpu"]
+        say("  CPU seconds from the start of publishing (user+system; x rosbag record's record process), "
+            "peak RSS:")
+        for key, who in (("rosbag_record", "rosbag record (record)"), ("rosbag_all", "rosbag record (all)"),
+                         ("recorder", "ros_mongo_server"), ("store", f"{backend} server"),
+                         ("recorder_and_store", "recorder + server")):
+            rss = figures["peak_rss_mb"].get(key)
+            per_mb = figures["per_mb"][key] * 1000
+            say(f"    {who:24s} {figures['seconds'][key]:6.2f} s = {per_mb:6.2f} ms/MB "
+                f"= {figures['x_rosbag_record'][key]:5.2f} x" + (f", peak RSS {rss:.0f} MB" if rss else ""))
     for backend, imp in results.get("import", {}).items():
         say(f"import ({backend}, {imp['messages']} msgs, {imp['megabytes']:.0f} MB): "
             f"{imp['import_msgs_per_s']:.0f} msgs/s, {imp['import_mb_per_s']:.1f} MB/s; raw bulk insert "
@@ -283,6 +323,8 @@ def main(argv=None):
     parser.add_argument("--fault-seconds", type=float, help="length of each injected fault (default 30, "
                         "quick 5)")
     parser.add_argument("--only-fault", action="store_true", help="run only the fault run")
+    parser.add_argument("--only-record", action="store_true", help="run only the record stage (with its "
+                        "CPU figures)")
     args = parser.parse_args(argv)
     duration = args.duration or (4.0 if args.quick else 20.0)
     backends = args.backends or (["couchdb"] if args.quick else list(BACKENDS))
@@ -305,7 +347,7 @@ def main(argv=None):
     load = os.getloadavg()
     results = {"duration": duration, "load_before": load, "cpus": os.cpu_count(), "record": {}}
     try:
-        if args.only_fault or args.bag is None:
+        if args.only_fault or (args.bag is None and not args.only_record):
             say(f"fault run: {fault_seconds:.0f} s of 401, {fault_seconds:.0f} s of 500 timeout ...")
             results["fault"] = bench_fault(core, servers["couchdb"], work, fault_seconds) \
                 if "couchdb" in servers else None
@@ -313,8 +355,9 @@ def main(argv=None):
             return _finish(args, results, work, load, servers, core, name="ros_mongo_fault.json")
         for backend in backends if args.bag is None else []:
             say(f"record: {backend}, {duration:.0f} s of publishing ...")
-            results["record"][backend] = bench_record(core, servers[backend].database_url("bench"), work,
-                                                      duration, backend)
+            results["record"][backend] = bench_record(core, servers[backend], work, duration, backend)
+        if args.only_record:
+            return _finish(args, results, work, load, servers, core, name="ros_mongo_record.json")
         bag = args.bag or Path(results["record"][backends[0]]["bag"])
         say("import ...")
         results["import"] = bench_import(bag, {b: servers[b].database_url("bench") for b in backends})

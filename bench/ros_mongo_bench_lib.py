@@ -1,10 +1,12 @@
 """Helpers of bench/ros_mongo_bench.py: servers, watchers, counts, raw bulk rates, gap errors, plots."""
 import base64
 import json
+import os
 import struct
 import threading
 import time
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 
@@ -63,6 +65,105 @@ def peak_rss_mb(pid: int) -> float:
         if line.startswith("VmHWM:"):
             return int(line.split()[1]) / 1024.0
     raise RuntimeError(f"no VmHWM for process {pid}")
+
+
+_TICKS = os.sysconf("SC_CLK_TCK")
+
+
+def _stat(pid: int):
+    """(parent pid, CPU seconds user+system, command name) of a live process, None once gone."""
+    try:
+        text = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    fields = text[text.rindex(")") + 2:].split()  # after "pid (comm) "; comm may hold spaces
+    command = text[text.index("(") + 1:text.rindex(")")]
+    return int(fields[1]), (int(fields[11]) + int(fields[12])) / _TICKS, command
+
+
+def _vm_hwm_mb(pid: int) -> float:
+    try:
+        return peak_rss_mb(pid)
+    except (OSError, RuntimeError):  # gone meanwhile, or a zombie
+        return 0.0
+
+
+class CpuWatch:
+    """CPU seconds (user+system, /proc/<pid>/stat) and peak RSS (VmHWM) of named processes and
+    all their descendants, sampled every `period` s by a thread, so a process's last figures are
+    known even after it exited (at most `period` s of its work missed). `mark(label)` keeps each
+    process's CPU at that moment; `cpu(name, since)` is the CPU used since a mark."""
+
+    def __init__(self, period: float = 0.1):
+        self.period = period
+        self.roots = {}        # name -> root pid
+        self.seen = {}         # name -> {pid: latest cpu seconds}
+        self.peak = {}         # name -> {pid: peak rss MB}
+        self.comm = {}         # pid -> command name
+        self.marks = {}        # label -> {pid: cpu seconds}
+        self.lock = threading.Lock()
+        self._stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, name="cpu_watch", daemon=True)
+        self.thread.start()
+
+    def add(self, name: str, pid: int) -> None:
+        with self.lock:
+            self.roots[name] = pid
+            self.seen.setdefault(name, {})
+            self.peak.setdefault(name, {})
+        self.sample()
+
+    def sample(self) -> None:
+        stats = {}
+        for entry in os.listdir("/proc"):
+            if entry.isdigit():
+                stat = _stat(int(entry))
+                if stat is not None:
+                    stats[int(entry)] = stat
+        children = {}
+        for pid, (parent, _, _) in stats.items():
+            children.setdefault(parent, []).append(pid)
+        with self.lock:
+            for name, root in self.roots.items():
+                todo, tree = [root], []
+                while todo:
+                    pid = todo.pop()
+                    if pid in stats:
+                        tree.append(pid)
+                        todo += children.get(pid, [])
+                for pid in tree:
+                    self.seen[name][pid] = stats[pid][1]
+                    self.comm[pid] = stats[pid][2]
+                    self.peak[name][pid] = max(self.peak[name].get(pid, 0.0), _vm_hwm_mb(pid))
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.period):
+            self.sample()
+
+    def mark(self, label: str) -> None:
+        """Keep every watched process's CPU seconds now, under `label`."""
+        self.sample()
+        with self.lock:
+            self.marks[label] = {pid: cpu for seen in self.seen.values() for pid, cpu in seen.items()}
+
+    def cpu(self, name: str, since: str, command: Optional[str] = None) -> float:
+        """CPU seconds `name` (and descendants; only `command` ones when given) used since a mark."""
+        before = self.marks[since]
+        with self.lock:
+            return sum(cpu - before.get(pid, 0.0) for pid, cpu in self.seen.get(name, {}).items()
+                       if command is None or self.comm.get(pid) == command)
+
+    def peak_rss_mb(self, name: str, command: Optional[str] = None) -> float:
+        """Peak resident memory (VmHWM, MB) of the largest process of `name`'s tree (of those
+        named `command` when given)."""
+        with self.lock:
+            return max((mb for pid, mb in self.peak.get(name, {}).items()
+                        if command is None or self.comm.get(pid) == command), default=0.0)
+
+    def close(self) -> None:
+        self._stop.set()
+        self.thread.join()
+        self.sample()
 
 
 def _seq(raw: bytes) -> int:

@@ -4,4 +4,4 @@
 # Extra pytest arguments pass through: make test TEST_ARGS="-k ros_mongo".
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
-exec python -m pytest "$@"
+exec python -m pytest --durations=20 "$@"

@@ -95,7 +95,7 @@ def test_demo_launch_brings_up_the_whole_stack_and_each_part_works(stack, rospy_
         wait_until(grew, timeout=60, what="people-count observations arriving")
 
     # 5. the demonstration robot in /lfd drives when the joystick's dead-man button is held
-    start = rospy_node.wait_for_message("/lfd/odom", Odometry, timeout=30).pose.pose.position
+    start = rospy_node.wait_for_message("/lfd/odom", Odometry, timeout=90).pose.pose.position
     joy = rospy.Publisher("/lfd/joy", Joy, queue_size=10)
     held = Joy(axes=[0.0, 1.0, 0, 0, 0, 0, 0, 0], buttons=[0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0])
 
@@ -105,4 +105,4 @@ def test_demo_launch_brings_up_the_whole_stack_and_each_part_works(stack, rospy_
         now = rospy_node.wait_for_message("/lfd/odom", Odometry, timeout=60).pose.pose.position
         return math.hypot(now.x - start.x, now.y - start.y) > 0.2
 
-    wait_until(moved, timeout=30, what="the /lfd robot moving under joystick teleop")
+    wait_until(moved, timeout=90, what="the /lfd robot moving under joystick teleop")

@@ -41,8 +41,8 @@ def test_simulated_robot_launches_and_publishes_the_original_four_topics(roslaun
     sim = roslaunch("robot_sim", "sim.launch", seed=1)
     topics = ["/odom", "/scan", "/camera/rgb/image_raw", "/joint_states", "/map"]
     sim.wait_for_topics(topics, timeout=60)
-    scan = rospy_node.wait_for_message("/scan", LaserScan, timeout=30)
-    grid = rospy_node.wait_for_message("/map", OccupancyGrid, timeout=30)
+    scan = rospy_node.wait_for_message("/scan", LaserScan, timeout=90)
+    grid = rospy_node.wait_for_message("/map", OccupancyGrid, timeout=90)
     assert len(scan.ranges) == 360
     assert all(scan.range_min <= r <= scan.range_max for r in scan.ranges)
     assert min(scan.ranges) < 3.0  # inside a 3 m wide hall something is always near
@@ -59,7 +59,7 @@ def test_single_node_with_private_params(roslaunch, rospy_node):
                                   "image_rate": 10.0, "image_width": 64, "image_height": 48},
                           remap={"camera/rgb/image_raw": "/cam"})
     node.wait_for_topics(["/cam"])
-    image = rospy_node.wait_for_message("/cam", Image, timeout=30)
+    image = rospy_node.wait_for_message("/cam", Image, timeout=90)
     assert (image.width, image.height, image.encoding, image.step) == (64, 48, "rgb8", 192)
     assert len(image.data) == 64 * 48 * 3
 
@@ -73,7 +73,7 @@ def test_waiting_on_a_node_that_dies_reports_its_log(roscore, tmp_path):
     try:
         # The node exits with its error; roslaunch, left with no process, exits too.
         with pytest.raises(ProcessDied, match="cannot read map file"):
-            broken.wait_for_topics(["/map"], timeout=30)
+            broken.wait_for_topics(["/map"], timeout=90)
     finally:
         broken.stop()
 

@@ -68,7 +68,7 @@ def observe(rospy_node):
         if topic not in publishers:
             publishers[topic] = rospy_node.Publisher(topic, ObjectObservation, queue_size=20000)
         publisher = publishers[topic]
-        wait_until(lambda: publisher.get_num_connections() > 0, 30, what=f"{server} on {topic}")
+        wait_until(lambda: publisher.get_num_connections() > 0, 90, what=f"{server} on {topic}")
         for msg in messages:
             publisher.publish(msg)
         target = before + (len(messages) if expect_received is None else expect_received)

@@ -254,7 +254,7 @@ def test_save_and_load_restore_the_layers_through_the_database(rospy_node, layer
     wipe.header.stamp = rospy.Time.now()
     restore = rospy_node.Publisher("/igmm_layers/restore", ClusterSet, queue_size=1, latch=True)
     restore.publish(wipe)
-    wait_until(lambda: not located(), 20, what="the building layer to be emptied")
+    wait_until(lambda: not located(), 90, what="the building layer to be emptied")
     restore.unregister()
     # ... and get it back from the database
     loaded = call(rospy_node, "load_clusters", LoadClusters, timestamp=saved.timestamp)

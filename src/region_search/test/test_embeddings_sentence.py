@@ -108,14 +108,36 @@ def test_phrase_recommender_finds_the_generated_buildings_places(sentence, build
 @pytest.mark.wordnet
 def test_numbers_as_text_only_confuse_rooms_that_differ_by_number(sentence, building_regions):
     """Why the number rule exists: without it, "classroom 101" is not reliably classroom_101."""
-    plain = PhraseRegionRecommender(sentence.embed_phrases, wordnet=WordNet(), number_weight=0.0)
-    ruled = PhraseRegionRecommender(sentence.embed_phrases, wordnet=WordNet())
+    # Name spelling off in both: it also matches "101" exactly (its own test below).
+    plain = PhraseRegionRecommender(sentence.embed_phrases, wordnet=WordNet(), number_weight=0.0,
+                                    name_spelling_weight=0.0)
+    ruled = PhraseRegionRecommender(sentence.embed_phrases, wordnet=WordNet(),
+                                    name_spelling_weight=0.0)
     gaps = []
     for recommender in (plain, ruled):
         recommender.set_regions(building_regions)
         scores = {r.region.name: r.score for r in recommender.recommend("classroom 101", 0).results}
         gaps.append(scores["classroom_101"] - scores["classroom_102"])
     assert gaps[0] < 0.05 and gaps[1] == pytest.approx(gaps[0] + 0.4, abs=1e-6)
+
+
+@pytest.mark.wordnet
+def test_name_share_and_spelling_find_the_real_floors_names(sentence, shared_data_dir):
+    """Dev phrases (bench/data/region_eval_real.yaml) the phrase method missed before it had the
+    bare-name share and the name-spelling match (issue 18): WordNet's senses of "far" (FAR, an
+    army) had drowned "levine far corner"."""
+    labels = json.loads((shared_data_dir / "maps" / "towne_levine_labels.json").read_text())
+    floor = [Region(name, pose["x"], pose["y"]) for name, pose in sorted(labels.items())]
+    before = PhraseRegionRecommender(sentence.embed_phrases, wordnet=WordNet(),
+                                     name_text_weight=0.0, name_spelling_weight=0.0)
+    now = PhraseRegionRecommender(sentence.embed_phrases, wordnet=WordNet())
+    for recommender in (before, now):
+        recommender.set_regions(floor)
+    for phrase, expected in (("the far corner of Levine", "levine_far_corner"),
+                             ("Levine Hall corner", "levine_far_corner")):
+        assert before.recommend(phrase, 1).results[0].region.name != expected
+        best = now.recommend(phrase, 1).results[0]
+        assert best.region.name == expected and "name spelled" in best.explanation
 
 
 def test_model_folders_without_a_model_are_clear_errors(tmp_path):

@@ -13,6 +13,7 @@ from region_search.recommender import LabelExpander, Region, RegionRecommender, 
 from region_search.text_similarity import (
     SpellingIndex,
     content_words,
+    name_spelling_score,
     spelling_similarity,
     string_baseline_score,
     tokenize,
@@ -56,6 +57,17 @@ def test_spelling_similarity_is_trigram_dice_and_numbers_match_only_exactly():
     index = SpellingIndex(["town", "tower", "gown", "42"])
     assert index.nearest("towne") == ("town", pytest.approx(6 / 9))
     assert index.nearest("zzzz") is None and index.nearest("42") is None
+
+
+def test_name_spelling_score_counts_the_phrase_words_spelled_like_the_name():
+    # "skirkanich" is the name; "hall" matches no name word; the name's "to" is a stop word.
+    assert name_spelling_score(["skirkanich", "hall"], "to_skirkanich") == pytest.approx(0.5)
+    # town ~ towne 6/9 (>= 0.6), 321 exactly; another number counts nothing.
+    assert name_spelling_score(["town", "321"], "towne_321") == pytest.approx((6 / 9 + 1) / 2)
+    assert name_spelling_score(["town", "311"], "towne_321") == pytest.approx(6 / 9 / 2)
+    assert name_spelling_score(["town"], "towne_321", min_similarity=0.7) == 0.0
+    assert name_spelling_score(["coffee"], "towne_321") == 0.0
+    assert name_spelling_score([], "towne_321") == 0.0
 
 
 def test_label_file_round_trip_with_the_generated_building(tmp_path):
@@ -175,3 +187,23 @@ def test_hubness_correction_lowers_labels_that_match_everything(embed):
     drop_elevator = score(plain, "elevator") - score(corrected, "elevator")
     assert drop_room > drop_elevator > 0
     assert "minus label hubness" in corrected.recommend("fountain", 1).results[0].explanation
+
+
+@pytest.mark.wordnet
+def test_a_share_of_the_word_score_is_the_label_name_alone(embed):
+    labels = regions(["printer_room", "cafe", "elevator", "water_fountain"])
+    expanded = RegionRecommender(embed, wordnet=WordNet(), name_text_weight=0.0)
+    names = RegionRecommender(embed)
+    shared = RegionRecommender(embed, wordnet=WordNet(), name_text_weight=0.25)
+    for recommender in (expanded, names, shared):
+        recommender.set_regions(labels)
+
+    def scores(recommender, phrase):
+        return {r.region.name: r.score for r in recommender.recommend(phrase, 0).results}
+
+    for phrase in ("coffee", "drinking fountain", "a lift"):
+        alone, wide, mixed = (scores(r, phrase) for r in (names, expanded, shared))
+        for label in alone:
+            assert mixed[label] == pytest.approx(0.75 * wide[label] + 0.25 * alone[label])
+    assert "on the name alone" in shared.recommend("coffee", 1).results[0].explanation
+    assert RegionRecommender(embed).name_text_weight == 0.0  # no WordNet: names only anyway

@@ -7,7 +7,7 @@ from robot_sim.configs import DetectionSimConfig, PeopleSimConfig
 
 def test_the_chapters_run_in_the_documented_order_and_each_has_a_title():
     assert list(CHAPTERS) == ["robot", "data_api", "object_layers", "region_search", "crowd_map",
-                              "demonstrations"]
+                              "demonstrations", "fleet"]
     assert all(module.TITLE and callable(module.run) for module in CHAPTERS.values())
 
 

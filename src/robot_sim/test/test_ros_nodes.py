@@ -11,7 +11,7 @@ def test_people_sim_publishes_people_counts(roslaunch, rospy_node):
 
     sim = roslaunch("robot_sim", "people_sim.launch", rate=20.0, robots=2)
     sim.wait_for_topics(["/people_counts"], timeout=60)
-    msg = rospy_node.wait_for_message("/people_counts", PeopleCount, timeout=30)
+    msg = rospy_node.wait_for_message("/people_counts", PeopleCount, timeout=90)
     assert msg.robot_id in ("robot_0", "robot_1") and msg.header.frame_id == "map"
     assert len(msg.cells) == len(msg.counts) == len(msg.seen_fraction) > 0
 
@@ -40,4 +40,4 @@ def test_object_detection_sim_publishes_its_detections_then_exits(roslaunch, ros
 def test_a_bad_scenario_ends_the_unicycle_sim_with_one_clear_line(roslaunch):
     sim = roslaunch.node("robot_sim", "unicycle_sim", params={"scenario": "no_such_scenario"})
     with pytest.raises(ProcessDied, match="ERROR: /unicycle_sim: cannot read scenario file"):
-        sim.wait_for_topics(["/odom"], timeout=30)
+        sim.wait_for_topics(["/odom"], timeout=90)

@@ -121,4 +121,4 @@ def test_bag_converter_launch(roslaunch, couchdb_url, tmp_path):
                        db_url=couchdb_url, tags="converted")
     assert launch.wait_for_exit(120) == 0, launch.log_tail()
     with open_store(couchdb_url) as store:
-        wait_until(lambda: store.count_messages(tags=["converted"]) == 56, 10, what="imported messages")
+        wait_until(lambda: store.count_messages(tags=["converted"]) == 56, 90, what="imported messages")

@@ -8,14 +8,13 @@ runs. Expected values come from what the test published, never from the code und
 """
 import subprocess
 import threading
-import time
 import uuid
 
 import pytest
 import requests
 import rospy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from nav_msgs.msg import Odometry
+from diagnostic_msgs.msg import DiagnosticStatus
+from recorder_harness import Sender, start_recorder, stored_xs
 from ros_mongo_samples import serialized
 from std_msgs.msg import String
 
@@ -25,8 +24,9 @@ from ros_mongo.bagio import export_bag
 from ros_mongo.errors import StoreError, StoreRefused
 from ros_mongo.quarantine import import_quarantine
 from ros_mongo.query import parse_query
+from ros_mongo.recorder import Recorder
 from ros_mongo.records import MessageRecord, split_time
-from ros_mongo.spool import read_entries
+from ros_mongo.spool import Spool, read_entries
 
 pytestmark = [pytest.mark.db]
 
@@ -127,70 +127,9 @@ def test_windowed_reader_keeps_advancing_on_a_slow_link(couchdb_server, proxy):
 
 
 # -- the recorder node through the proxy --------------------------------------------------------------
-class Diagnostics:
-    """The recorder's latest status (level, message, values) from /diagnostics."""
-
-    def __init__(self):
-        self.level, self.message, self.values, self.levels = None, "", {}, []
-        self.subscriber = rospy.Subscriber("/diagnostics", DiagnosticArray, self._receive)
-
-    def _receive(self, msg):
-        for status in msg.status:
-            if status.name == "ros_mongo_server: recorder":
-                self.level, self.message = status.level, status.message
-                self.values = {kv.key: kv.value for kv in status.values}
-                self.levels.append((status.level, status.message))
-
-    def count(self, key):
-        return int(self.values.get(key, -1))
-
-    def close(self):
-        self.subscriber.unregister()
-
-
-@pytest.fixture
-def diagnostics(rospy_node):
-    watcher = Diagnostics()
-    yield watcher
-    watcher.close()
-
-
-class Sender:
-    """Publishes Odometry with pose.position.x = 0, 1, 2 ... (paced: the publisher's rate)."""
-
-    def __init__(self, topic="/odom", rate=500.0):
-        self.publisher = rospy.Publisher(topic, Odometry, queue_size=10000)
-        self.rate, self.sent = rate, 0
-
-    def connected(self):
-        wait_until(lambda: self.publisher.get_num_connections() > 0, 60, what="recorder subscribed")
-        return self
-
-    def send(self, count):
-        for _ in range(count):
-            msg = Odometry()
-            msg.pose.pose.position.x = float(self.sent)
-            self.publisher.publish(msg)
-            self.sent += 1
-            time.sleep(1.0 / self.rate)
-
-    def close(self):
-        self.publisher.unregister()
-
-
 def recorder(roslaunch, url, tmp_path, **params):
-    settings = {"db_url": url, "topics": ["/odom"], "spool_path": str(tmp_path / "recorder.spool"),
-                "retry_period": 0.3, "db_timeout": 10.0, "session_id": "faults", "diagnostics_period": 0.2}
-    settings.update(params)
-    name = f"recorder_{uuid.uuid4().hex[:8]}"
-    launch = roslaunch.node("ros_mongo", "ros_mongo_server", name=name, params=settings)
-    launch.wait_for_nodes([f"/{name}"], timeout=60)
-    return launch
-
-
-def stored_xs(url, topic="/odom"):
-    with open_store(url) as store:
-        return sorted(m.fields["pose"]["pose"]["position"]["x"] for m in store.find_messages(topic=topic))
+    """The recorder node with a longer database timeout (the proxy delays answers)."""
+    return start_recorder(roslaunch, url, tmp_path, **{"db_timeout": 10.0, "session_id": "faults", **params})
 
 
 FAULTS = {
@@ -209,7 +148,7 @@ def test_recorder_keeps_every_message_through_a_fault_and_stores_each_once(
     if FAULTS[fault].get("member"):
         proxy.set(member=True)
     recorder(roslaunch, proxy.database_url(name), tmp_path)
-    sender = Sender().connected()
+    sender = Sender(rate=500.0).connected()
     sender.send(100)
     wait_until(lambda: diagnostics.count("stored") == 100, 60, what="100 stored")
     proxy.set(**FAULTS[fault])
@@ -239,7 +178,7 @@ def test_rotated_password_then_fixed_by_the_operator_with_a_credentials_file(
     credentials.write_text(f"robot:{secret}\n")
     proxy.set(require_auth=f"robot:{secret}")
     launch = recorder(roslaunch, proxy.database_url(name), tmp_path, db_credentials_file=str(credentials))
-    sender = Sender().connected()
+    sender = Sender(rate=500.0).connected()
     sender.send(100)
     wait_until(lambda: diagnostics.count("stored") == 100, 60, what="100 stored")
     proxy.set(require_auth="robot:rotated-by-someone")     # the server's password changed
@@ -262,7 +201,7 @@ def test_spool_survives_an_auth_error_during_the_drain(couchdb_server, proxy, ro
     name = _names()
     url = proxy.database_url(name)
     recorder(roslaunch, url, tmp_path)
-    sender = Sender().connected()
+    sender = Sender(rate=500.0).connected()
     sender.send(100)
     wait_until(lambda: diagnostics.count("stored") == 100, 60, what="100 stored")
     proxy.set(timeout="writes")
@@ -289,7 +228,7 @@ def test_oversized_document_is_split_out_and_only_it_is_quarantined(couchdb_serv
              batch_period=3.0, quarantine_path=str(quarantine))
     notes = rospy.Publisher("/notes", String, queue_size=100)
     wait_until(lambda: notes.get_num_connections() > 0, 60, what="/notes subscribed")
-    sender = Sender().connected()
+    sender = Sender(rate=500.0).connected()
     big = String(data="x" * 60000)                    # fits pouchdb-server, not this "CouchDB"
     sender.send(40)
     notes.publish(String(data="small"))
@@ -318,7 +257,7 @@ def test_writer_failure_is_reported_and_the_writer_restarted(couchdb_server, pro
                                                              diagnostics):
     name = _names()
     recorder(roslaunch, proxy.database_url(name), tmp_path)
-    sender = Sender().connected()
+    sender = Sender(rate=500.0).connected()
     sender.send(50)
     wait_until(lambda: diagnostics.count("stored") == 50, 60, what="50 stored")
     proxy.set(bulk_answer="[null]")                   # a 201 whose body has an unexpected shape
@@ -374,3 +313,31 @@ def test_tls_with_a_private_ca_and_a_client_certificate(couchdb_server, private_
             store.put_topic(TopicInfo.of_class("/chatter", String))
             assert store.insert_records(_records(20)) == 20
             assert [m.message().data for m in store.find_messages()] == [f"m{i}" for i in range(20)]
+
+
+def test_a_full_spool_keeps_the_batches_in_memory_until_the_server_answers(couchdb_server, proxy,
+                                                                           tmp_path):
+    """~spool_max_mb reached while the server times out: nothing dropped, nothing beyond the
+    limit on disk; every message stored once the server answers again."""
+    name = _names()
+    _admin_creates(couchdb_server, name)
+    limit = 4096
+    with open_store(proxy.database_url(name)) as store:
+        proxy.set(timeout="writes")
+        spool = Spool(tmp_path / "rec.spool", max_bytes=limit, min_free_bytes=0).open()
+        recorder = Recorder(store, spool, batch_size=50, batch_period=0.05, retry_period=0.2).start()
+        for i in range(600):
+            assert recorder.receive("/chatter", serialized(String(data=f"m{i}")),
+                                    split_time(1000 + 0.01 * i), String._type, String._md5sum,
+                                    String._full_text)
+        wait_until(lambda: "spool refuses writes" in recorder.fault, 120, what="the spool to be full")
+        counts = recorder.counts()
+        assert counts["dropped"] == 0 and counts["stored"] == 0 and counts["queued"] > 0, counts
+        assert (tmp_path / "rec.spool").stat().st_size <= limit
+        proxy.clear()
+        counts = recorder.stop(timeout=120)
+        spool.close()
+        assert counts["dropped"] == 0 and counts["stored"] == 600, counts
+        assert counts["spool_pending"] == 0
+        got = [m.message().data for m in store.find_messages(topic="/chatter")]
+    assert got == [f"m{i}" for i in range(600)]

@@ -5,19 +5,28 @@ Real processes only: one pouchdb-server per robot plus a central one (ros_harnes
 and ids are read from the stores, never built here.
 """
 import json
+import re
 import sys
 import uuid
 from pathlib import Path
+from urllib.parse import unquote
 
 import pytest
 import requests
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
+from sensor_msgs.msg import Image
 from std_srvs.srv import Trigger
 
 from ros_harness import LaunchSet, ManagedProcess, PouchDBServer, RosCore, wait_until
-from ros_mongo.replication import CouchDatabase, ReplicationError, ReplicationSpec
+from ros_mongo import open_store
+from ros_mongo.replication import (
+    CouchDatabase,
+    PushReplication,
+    ReplicationError,
+    ReplicationSpec,
+)
 from ros_mongo.retention import Retention
 
 HERE = Path(__file__).resolve().parent
@@ -131,6 +140,116 @@ def test_retention_deletes_only_old_documents_central_holds(tmp_path):
         with pytest.raises(ReplicationError, match="-5"):
             Retention(CouchDatabase(local_url), CouchDatabase(central_url), ReplicationSpec(),
                       older_than=-5)
+
+
+# -- outages of one robot's link (real servers and replication, the recorder's store API) ------
+
+def record_odometry(store, robot_id, first, count):
+    """Record Odometry messages numbered first.. (frame_id) as the recorder does (store API)."""
+    for index in range(first, first + count):
+        msg = Odometry()
+        msg.header.frame_id = str(index)
+        store.insert_message("/odom", msg, robot_id=robot_id)
+
+
+def server_log_since_start(server):
+    """pouchdb-server's request log (log.txt in its data directory) since its last start."""
+    text = (server.data_dir / "log.txt").read_text(errors="replace")
+    return text[text.rindex("pouchdb-server has started"):]
+
+
+def same_documents(local_url, central_url):
+    """The replicated documents of the robot, each central with the same revision."""
+    central = {d["_id"]: d["_rev"] for d in all_docs(central_url)}
+    local = {d["_id"]: d["_rev"] for d in all_docs(local_url) if d.get("kind") in ("message", "topic")}
+    return local == {i: central.get(i) for i in local}
+
+
+@pytest.mark.db
+def test_central_restart_resumes_replication_from_its_checkpoint(tmp_path):
+    robot_id = "robot_a"
+    with PouchDBServer(tmp_path / "robot") as robot:
+        central = PouchDBServer(tmp_path / "central").start()
+        try:
+            local_url, central_url = robot.database_url("robot_data"), central.database_url("fleet")
+            assert requests.put(central_url, timeout=30).status_code == 201
+            with open_store(local_url) as store:
+                record_odometry(store, robot_id, 0, 450)
+                local = CouchDatabase(local_url)
+                replication = PushReplication.for_robot(local, CouchDatabase(central_url), robot_id)
+                replication.start()
+                wait_until(lambda: count_messages(central_url) == 450, LONG, what="450 messages central")
+                # the checkpoint the store's replicator keeps on central (its id from central's log)
+                log = server_log_since_start(central)
+                checkpoint_ids = set(re.findall(r"PUT /fleet/_local/(\S+) 201", log))
+                assert len(checkpoint_ids) == 1, log[-2000:]
+                checkpoint_url = central_url + "/_local/" + checkpoint_ids.pop()
+
+                def checkpoint_seq():
+                    return requests.get(checkpoint_url, timeout=30).json()["last_seq"]
+
+                wait_until(lambda: checkpoint_seq() >= 450, LONG, what="a checkpoint after 450")
+                before = checkpoint_seq()
+                first_run_diffs = log.count("POST /fleet/_revs_diff")
+                assert first_run_diffs >= 4  # 450 changes in batches of 100: a replay is visible
+
+                central.stop()
+                record_odometry(store, robot_id, 450, 60)  # recording goes on, central is down
+                assert count_messages(local_url) == 510
+                central.start()
+                replication.trigger()  # what the replicator node does when central is back
+                wait_until(lambda: count_messages(central_url) == 510, LONG, what="510 messages central")
+                wait_until(lambda: checkpoint_seq() > before, LONG, what="the checkpoint moving on")
+
+                log = server_log_since_start(central)
+                # the restarted replication read its checkpoint and sent only what came after it:
+                # a replay from zero compares all 510 changes again (at least as many _revs_diff
+                # requests as the first run)
+                assert re.search(r"GET /fleet/_local/\S+ 200", log), log[-2000:]
+                assert log.count("POST /fleet/_revs_diff") < first_run_diffs, log[-3000:]
+                assert same_documents(local_url, central_url)
+                assert sorted(content(d)[2] for d in messages(all_docs(central_url))) == list(range(510))
+                replication.stop()
+        finally:
+            central.stop()
+
+
+@pytest.mark.db
+def test_robot_store_restart_mid_replication_loses_nothing(tmp_path):
+    robot_id = "robot_b"
+    pixels = bytes(i % 251 for i in range(640 * 480))
+    with PouchDBServer(tmp_path / "central") as central:
+        robot = PouchDBServer(tmp_path / "robot").start()
+        try:
+            local_url, central_url = robot.database_url("robot_data"), central.database_url("fleet")
+            assert requests.put(central_url, timeout=30).status_code == 201
+            with open_store(local_url) as store:
+                for index in range(200):  # 307 KB each (attachments): replication takes a while
+                    image = Image(height=480, width=640, encoding="mono8", step=640, data=pixels)
+                    image.header.frame_id = str(index)
+                    store.insert_message("/camera/rgb/image_raw", image, robot_id=robot_id)
+            local = CouchDatabase(local_url)
+            replication = PushReplication.for_robot(local, CouchDatabase(central_url), robot_id)
+            replication.start()
+            wait_until(lambda: count_messages(central_url) >= 10, LONG, what="replication under way")
+            assert count_messages(central_url) < 200  # mid-replication
+            robot.restart()  # the store (and its replicator) stops mid-stream and comes back
+            with open_store(local_url) as store:
+                record_odometry(store, robot_id, 0, 30)  # recording after the restart
+            # the replication document persists: the store's replicator resumes it by itself
+            wait_until(lambda: count_messages(central_url) == 230, LONG, what="230 messages central")
+            assert same_documents(local_url, central_url)
+            central_docs = all_docs(central_url)
+            assert [d["_id"] for d in central_docs if d.get("_conflicts")] == []
+            found = sorted((d["topic"], content(d)[2]) for d in messages(central_docs))
+            assert found == sorted([("/camera/rgb/image_raw", i) for i in range(200)]
+                                   + [("/odom", i) for i in range(30)])
+            image = next(d for d in messages(central_docs) if d["topic"] == "/camera/rgb/image_raw")
+            raw = requests.get(f"{central_url}/{unquote(image['_id'])}/raw", timeout=30)
+            assert raw.status_code == 200 and len(raw.content) == image["size"]
+            replication.stop()
+        finally:
+            robot.stop()
 
 
 # -- one robot: diagnostics and services -------------------------------------------------------

@@ -3,14 +3,13 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 import uuid
 
 import pytest
 import rospy
-from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
+from recorder_harness import Sender, start_recorder, stored_xs
 from ros_mongo_samples import custom_message, image, joints, odometry, scan, serialized
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Image, JointState, LaserScan
@@ -24,83 +23,7 @@ from ros_mongo.srv import Count, Start
 pytestmark = [pytest.mark.ros, pytest.mark.db]
 
 
-class Diagnostics:
-    """The recorder's latest counts from /diagnostics."""
-
-    def __init__(self):
-        self.values = {}
-        self.subscriber = rospy.Subscriber("/diagnostics", DiagnosticArray, self._receive)
-
-    def _receive(self, msg):
-        for status in msg.status:
-            if status.name == "ros_mongo_server: recorder":
-                self.values = {kv.key: kv.value for kv in status.values}
-
-    def count(self, key):
-        return int(self.values.get(key, -1))
-
-    def close(self):
-        self.subscriber.unregister()
-
-
-@pytest.fixture
-def diagnostics(rospy_node):
-    watcher = Diagnostics()
-    yield watcher
-    watcher.close()
-
-
-class Sender:
-    """Publishes Odometry with pose.position.x = 0, 1, 2 ... at `rate` Hz on a thread."""
-
-    def __init__(self, topic="/odom", rate=200.0):
-        self.publisher = rospy.Publisher(topic, Odometry, queue_size=10000)
-        self.rate, self.sent, self._stop = rate, 0, threading.Event()
-        self._thread = None
-
-    def connected(self, timeout=60):
-        wait_until(lambda: self.publisher.get_num_connections() > 0, timeout, what="recorder subscribed")
-        return self
-
-    def send(self, count):
-        for _ in range(count):
-            if self._stop.is_set():
-                return
-            msg = Odometry()
-            msg.pose.pose.position.x = float(self.sent)
-            self.publisher.publish(msg)
-            self.sent += 1
-            time.sleep(1.0 / self.rate)  # pacing the publisher (its rate), not synchronisation
-
-    def start(self, count):
-        self._thread = threading.Thread(target=self.send, args=(count,), daemon=True)
-        self._thread.start()
-        return self
-
-    def join(self):
-        self._thread.join()
-
-    def close(self):
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join()
-        self.publisher.unregister()
-
-
-def recorder(roslaunch, url, tmp_path, **params):
-    settings = {"db_url": url, "topics": ["/odom"], "spool_path": str(tmp_path / "recorder.spool"),
-                "retry_period": 0.3, "db_timeout": 2.0, "session_id": "test", "diagnostics_period": 0.2}
-    settings.update(params)
-    name = f"recorder_{uuid.uuid4().hex[:8]}"  # parameters stay on the master: one name per run
-    launch = roslaunch.node("ros_mongo", "ros_mongo_server", name=name, params=settings)
-    launch.wait_for_nodes([f"/{name}"])
-    launch.node_name = f"/{name}"
-    return launch
-
-
-def stored_xs(url):
-    with open_store(url) as store:
-        return sorted(m.fields["pose"]["pose"]["position"]["x"] for m in store.find_messages(topic="/odom"))
+recorder = start_recorder
 
 
 def test_recorder_stores_all_types_new_topics_and_original_tags(roslaunch, db_url, tmp_path, diagnostics):

@@ -117,3 +117,51 @@ def test_time_only_queries_are_unchanged(filled):
     stamp = genpy.Time(1_700_000_002, 0).to_sec()
     assert [int(m.receive_time) - 1_700_000_000 for m in filled.find(Query.build(start_time=stamp))] == \
         [2, 3, 4, 5]
+
+
+@pytest.fixture
+def authored(db_url):
+    """#0 by ServiceRobot (lidar), #1 by Alice (lidar), #2 without an author (odom)."""
+    from ros_mongo import TopicInfo, make_record
+    from ros_mongo.records import split_time
+
+    with open_store(db_url) as store:
+        store.put_topic(TopicInfo.of_class("/scan", LaserScan))
+        store.put_topic(TopicInfo.of_class("/odom", String))
+        records = []
+        for i, (topic, cls, tag, author) in enumerate([("/scan", LaserScan, "lidar", "ServiceRobot"),
+                                                       ("/scan", LaserScan, "lidar", "Alice"),
+                                                       ("/odom", String, "odom", None)]):
+            raw = _serialized(cls())
+            records.append(make_record(topic, cls, raw, receive=split_time(1_700_000_000 + i), tags=[tag],
+                                       author=author))
+        store.insert_records(records)
+        yield store
+
+
+def _serialized(msg):
+    from io import BytesIO
+    buffer = BytesIO()
+    msg.serialize(buffer)
+    return buffer.getvalue()
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("author ServiceRobot", [0]),                     # the original README's example 1
+    ("author Alice", [1]),
+    ("author Nobody", []),
+    ("tags lidar", [0, 1]),                           # the original README's example 2
+    ("tags:lidar", [0, 1]),
+    ("tags=odom", [2]),
+    ("author ServiceRobot tags odom", [0]),           # words after the first two are ignored
+    ("{author: Alice, tags: [lidar]}", [1]),
+    ("{author: Alice, tags: [odom]}", []),
+])
+def test_original_query_forms_mean_the_same_on_both_backends(authored, text, expected):
+    from ros_mongo.query import parse_query
+
+    query = parse_query(text)
+    got = [int(m.receive_time) - 1_700_000_000 for m in authored.find(query)]
+    assert got == expected
+    assert authored.count(query) == len(expected)
+    assert [m.author for m in authored.find(query)] == [["ServiceRobot", "Alice", None][i] for i in expected]

@@ -180,3 +180,47 @@ def test_credentials_never_shown():
     with pytest.raises(StoreUnavailable) as err:
         store.ping()
     assert "s3cret" not in str(err.value)
+
+
+def test_blob_document_of_the_previous_version_still_loads_and_is_not_written_again(couchdb_url):
+    """The previous version wrote attachment documents with a server-made revision (plain
+    `_bulk_docs`); they load as before, and a retry of the same record leaves them alone."""
+    import base64
+
+    import requests
+
+    big = image(width=400, height=300)  # 360,000 bytes of pixels: above the blob threshold
+    raw = serialized(big)
+    record = make_record("/camera/rgb/image_raw", big.__class__, raw, receive=split_time(20.5),
+                         session_id="old", robot_id="r1")
+    old_form = {"_id": record.id, "kind": "message", "topic": "/camera/rgb/image_raw",
+                "type": "sensor_msgs/Image", "md5sum": big.__class__._md5sum, "receive_time": 20.5,
+                "receive_secs": 20, "receive_nsecs": 500000000, "header_stamp": 1.0, "tags": [],
+                "session_id": "old", "robot_id": "r1", "callerid": "", "size": len(raw),
+                "msg": {"height": 300, "width": 400, "encoding": "rgb8", "data": None},
+                "_attachments": {"raw": {"content_type": "application/octet-stream",
+                                         "data": base64.b64encode(raw).decode()}}}
+    with open_store(couchdb_url) as store:
+        store.put_topic(TopicInfo.of_class("/camera/rgb/image_raw", big.__class__, robot_id="r1"))
+        answer = requests.post(f"{couchdb_url}/_bulk_docs", json={"docs": [old_form]}, timeout=30)
+        assert answer.status_code == 201 and "error" not in answer.json()[0]
+        rev = answer.json()[0]["rev"]
+        [stored] = list(store.find_messages(session_id="old"))
+        assert stored.raw == raw and stored.fields["width"] == 400
+        assert store.insert_records([record]) == 0  # already there: not written again
+    doc = http_get_json(f"{couchdb_url}/{record.id}?conflicts=true")
+    assert doc["_rev"] == rev and "_conflicts" not in doc
+
+
+def test_blob_documents_are_stored_once_without_conflicts(couchdb_url):
+    big = image(width=400, height=300)
+    records = [make_record("/camera/rgb/image_raw", big.__class__, serialized(big),
+                           receive=split_time(30 + i)) for i in range(3)]
+    with open_store(couchdb_url) as store:
+        store.put_topic(TopicInfo.of_class("/camera/rgb/image_raw", big.__class__))
+        assert store.insert_records(records[:2]) == 2
+        assert store.insert_records(records) == 1  # a retry after an unknown outcome
+        assert [m.raw for m in store.find_messages(topic="/camera/rgb/image_raw")] == [r.raw for r in records]
+    for record in records:
+        doc = http_get_json(f"{couchdb_url}/{record.id}?conflicts=true&revs_info=true")
+        assert "_conflicts" not in doc and [i["rev"] for i in doc["_revs_info"]] == [doc["_rev"]]

@@ -1,8 +1,9 @@
 """The layer server node's ROS side: observations in, markers out (services: ros_services.py)."""
 import collections
+import json
 import re
 import threading
-from typing import Dict, List, Tuple
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 import rospy
@@ -13,6 +14,7 @@ from visualization_msgs.msg import MarkerArray
 
 from igmm_layers.errors import IGMMError, InvalidInputError
 from igmm_layers.msg import ClusterSet
+from igmm_layers.ros_central import CentralSource
 from igmm_layers.ros_convert import apply_cluster_set, layer_markers, rotation_matrix, size_covariance
 from igmm_layers.ros_services import LayerServices
 from igmm_layers.server_config import ServerConfig
@@ -49,13 +51,18 @@ class LayerServer:
       ~marker_rate (double, 2.0 Hz; 0: no markers), ~pair_method (str, "distance_weighted"),
       ~pair_max_distance (double, 5.0 m), ~db_url (str, ""), ~tf_timeout (double, 0.2 s),
       ~queue_size (int, 10000): observations waiting to be learnt (more are dropped and counted).
+      ~source (str, "topic"): "central" learns from every robot's ObjectObservation messages in the
+          central fleet database ~central_url (its `_changes` feed; ros_central.py) instead of the
+          observation topics; ~central_topics (recorded topics, []: all), ~central_clusters
+          (false: also the cluster sets robots saved), ~central_credentials_file.
     Topics:
       in:  ~observations, ~place_observations, per-region topics (robot_common/ObjectObservation);
            ~restore (igmm_layers/ClusterSet): replaces the layers it contains.
       out: ~markers/<region>/<objects|regions> (visualization_msgs/MarkerArray, only when
            subscribed); ~restore (latched, by ~load_clusters).
     Services (ros_services.py): ~lookup_object, ~pair_likelihood, ~alternate_object,
-      ~locate_objects, ~count_objects, ~save_clusters, ~load_clusters, ~layer_info.
+      ~locate_objects, ~count_objects, ~save_clusters, ~load_clusters, ~layer_info (its message
+      says, for source central, which robots and how many observations of each were learnt).
     """
 
     def __init__(self, config: ServerConfig):
@@ -71,22 +78,31 @@ class LayerServer:
         self._restores: Dict[float, Tuple[threading.Event, list]] = {}
         self._running = False
         self.topics: Dict[Key, str] = {}
+        self.central: Optional[CentralSource] = None
+        # source central: robot -> {"observations": n, "clusters": n} learnt into the layers
+        self.learned: Dict[str, Dict[str, int]] = {}
 
     # --- wiring -----------------------------------------------------------------------------
     def setup(self) -> None:
         self.tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(60))
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
         size = self.config.queue_size
-        self.subscribers = [
-            rospy.Subscriber(_private(self.config.observation_topic), ObjectObservation,
-                             self._enqueue_observation, callback_args=("", "objects"), queue_size=size),
-            rospy.Subscriber(_private(self.config.place_observation_topic), ObjectObservation,
-                             self._enqueue_observation, callback_args=("", "regions"), queue_size=size)]
+        central = self.config.source == "central"
+        if central:
+            self.central = CentralSource(self)
+        self.subscribers = []
+        topics = [(_private(self.config.observation_topic), "", "objects"),
+                  (_private(self.config.place_observation_topic), "", "regions")]
         for (region_id, kind), params in self.config.regions.items():
             if params.observation_topic:
                 self.topics[(region_id, kind)] = rospy.resolve_name(params.observation_topic)
+                topics.append((params.observation_topic, region_id, kind))
+        for topic, region_id, kind in topics:
+            if central:  # observations recorded on this topic by any robot go to this layer
+                self.central.route(rospy.resolve_name(topic), kind, region_id)
+            else:
                 self.subscribers.append(rospy.Subscriber(
-                    params.observation_topic, ObjectObservation, self._enqueue_observation,
+                    topic, ObjectObservation, self._enqueue_observation,
                     callback_args=(region_id, kind), queue_size=size))
         self.restore_pub = rospy.Publisher("~restore", ClusterSet, queue_size=2, latch=True)
         self.subscribers.append(rospy.Subscriber("~restore", ClusterSet, self._enqueue_restore,
@@ -98,11 +114,15 @@ class LayerServer:
         self._running = True
         self._worker = threading.Thread(target=self._work, name="igmm_layers_worker", daemon=True)
         self._worker.start()
+        if self.central is not None:
+            self.central.start()
         if self.config.marker_rate > 0:
             self._timer = rospy.Timer(rospy.Duration(1.0 / self.config.marker_rate), self._publish_markers)
         rospy.on_shutdown(self.stop)
 
     def stop(self) -> None:
+        if self.central is not None:
+            self.central.stop()
         with self._wake:
             self._running = False
             self._wake.notify_all()
@@ -114,8 +134,19 @@ class LayerServer:
             if len(self._queue) >= self.config.queue_size:
                 self._drop(f"queue full ({self.config.queue_size} observations waiting)")
                 return
-            self._queue.append(("obs", msg, args, rospy.get_time()))
+            self._queue.append(("obs", msg, args, rospy.get_time(), None))
             self._wake.notify()
+
+    def enqueue_central(self, msg: ObjectObservation, args: Key, robot: str, what: str) -> None:
+        """Queue an observation read from the central database (recorded by `robot`; `what`:
+        "observations" or "clusters" is counted in `learned` once learnt, "" is not); waits
+        while the queue is full (the feed is not lost)."""
+        with self._wake:
+            while self._running and len(self._queue) >= self.config.queue_size:
+                self._wake.wait(0.5)
+            self.received += 1
+            self._queue.append(("obs", msg, args, rospy.get_time(), (robot, what)))
+            self._wake.notify_all()
 
     def _enqueue_restore(self, msg: ClusterSet) -> None:
         with self._wake:
@@ -136,6 +167,7 @@ class LayerServer:
                     return
                 items = list(self._queue)
                 self._queue.clear()
+                self._wake.notify_all()
             batch: List = []
             for item in items:
                 if item[0] == "restore":
@@ -148,14 +180,14 @@ class LayerServer:
 
     def _learn(self, items: List) -> None:
         groups: Dict[Tuple[str, str, str], List] = collections.OrderedDict()
-        for _, msg, args, received in items:
+        for _, msg, args, received, origin in items:
             try:
                 region_id, kind, row = self._convert(msg, args, received)
             except (InvalidInputError, tf2_ros.TransformException) as err:
                 with self._wake:
                     self._drop(str(err))
                 continue
-            groups.setdefault((region_id, kind, msg.class_name), []).append(row)
+            groups.setdefault((region_id, kind, msg.class_name), []).append(row + (origin,))
         for (region_id, kind, class_name), rows in groups.items():
             positions = np.array([r[0] for r in rows])
             covs = None
@@ -167,6 +199,11 @@ class LayerServer:
                     layer.observe(class_name, positions, [r[1] for r in rows], covs, [r[3] for r in rows])
                 with self._wake:
                     self.applied += len(rows)
+                    for row in rows:
+                        if row[4] is not None and row[4][1]:
+                            tally = self.learned.setdefault(row[4][0], {"observations": 0,
+                                                                        "clusters": 0})
+                            tally[row[4][1]] += 1
             except IGMMError as err:
                 with self._wake:
                     for _ in rows:
@@ -258,6 +295,20 @@ class LayerServer:
     def counters(self) -> Tuple[int, int, int, str]:
         with self._wake:
             return self.received, self.applied, self.dropped, self.last_drop_reason
+
+    def learned_status(self) -> str:
+        """Source central: which robots and how many of their observations (and saved clusters)
+        the layers learnt, and the feed position read; "" for source topic."""
+        if self.central is None:
+            return ""
+        with self._wake:
+            learned = {robot: dict(tally) for robot, tally in sorted(self.learned.items())}
+        robots = "; ".join(f"{robot}: {tally['observations']} observations, {tally['clusters']} "
+                           f"saved clusters" for robot, tally in learned.items()) or "none yet"
+        error = f"; last error: {self.central.follower.last_error}" \
+            if self.central.follower.last_error else ""
+        return (f"learned from {len(learned)} robots: {robots} (central {self.central.shown} "
+                f"read to sequence {json.dumps(self.central.seq)}){error}")
 
 
 def _private(name: str) -> str:

@@ -31,13 +31,15 @@ def _where(db_url: str) -> str:
     return redact_url(db_url)
 
 
-def save_cluster_set(db_url: str, msg: ClusterSet) -> Tuple[str, str]:
-    """Store `msg` with tags "objects" and its timestamp; returns (document id, timestamp tag)."""
+def save_cluster_set(db_url: str, msg: ClusterSet, robot_id: str = "") -> Tuple[str, str]:
+    """Store `msg` with tags "objects" and its timestamp (and the robot id, if given); returns
+    (document id, timestamp tag)."""
     stamp = msg.header.stamp.to_sec()
     tag = timestamp_tag(stamp)
     try:
         with _open(db_url) as store:
-            doc_id = store.insert_message(CLUSTER_TOPIC, msg, tags=(TAG, tag), receive_time=stamp)
+            doc_id = store.insert_message(CLUSTER_TOPIC, msg, tags=(TAG, tag), receive_time=stamp,
+                                         robot_id=robot_id or None)
     except StoreError as err:
         raise PersistenceError(f"could not save clusters to {_where(db_url)}: {err}") from err
     return doc_id, tag

@@ -150,7 +150,9 @@ class LayerServices:
         layers = [layer for _, layer in sorted(self.layers.layers.items())]
         keys = [(layer.region_id, layer.kind) for layer in layers]
         return LayerInfo._response_class(
-            success=True, message=f"{len(layers)} layers", region_ids=[k[0] for k in keys],
+            success=True, message="; ".join(filter(None, [f"{len(layers)} layers",
+                                                          self.server.learned_status()])),
+            region_ids=[k[0] for k in keys],
             layers=[k[1] for k in keys], observation_topics=[self.server.topics.get(k, "") for k in keys],
             classes=[len(layer.classes) for layer in layers],
             clusters=[layer.n_clusters() for layer in layers],
@@ -164,7 +166,8 @@ class LayerServices:
         with self.server.lock:
             layers = [layer for kind in kinds for layer in self.layers.select(req.region_id, kind)]
             msg = cluster_set(layers, rospy.Time.now(), self.server.config.map_frame)
-        doc_id, tag = save_cluster_set(self.server.config.db_url, msg)
+        doc_id, tag = save_cluster_set(self.server.config.db_url, msg,
+                                       self.server.config.robot_id)
         return SaveClusters._response_class(
             success=True, id=doc_id, timestamp=tag, clusters=len(msg.clusters),
             message=f"saved {len(msg.clusters)} clusters of {len(layers)} layers as {tag}")

@@ -7,7 +7,7 @@ per-layer defaults are LayerParams'); `python -m robot_common.config_files --wri
 it. Bad values raise InvalidInputError (the package's error) naming the parameter.
 """
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Dict, List, Mapping, Tuple
 
 from igmm_layers.errors import InvalidInputError
@@ -15,9 +15,11 @@ from igmm_layers.hierarchy import ClassHierarchy
 from igmm_layers.layers import LayerParams, LayerSet, check_kind
 from igmm_layers.queries import DEFAULT_MAX_DISTANCE, DEFAULT_PAIR_METHOD, PAIR_METHODS
 from robot_common.errors import ConfigError
-from robot_common.params import NodeConfig, param
+from robot_common.params import param
+from ros_mongo.changes import CentralSourceParams
 
 __all__ = ["ServerParams", "ServerConfig"]
+
 
 _LAYER_DEFAULTS = {name: value for name, value in asdict(LayerParams()).items()
                    if name != "observation_topic"}
@@ -36,7 +38,7 @@ _CLASS_COLOURS = {
 
 
 @dataclass
-class ServerParams(NodeConfig):
+class ServerParams(CentralSourceParams):
     """The layer server's private parameters as given (node `igmm_layers`)."""
 
     map_frame: str = param("map", "frame of all clusters; observations in other frames are "
@@ -61,10 +63,15 @@ class ServerParams(NodeConfig):
     pair_max_distance: float = param(DEFAULT_MAX_DISTANCE, "range (m) of the object pair likelihood")
     db_url: str = param("", "database of save_clusters/load_clusters (CouchDB http://... or "
                         "MongoDB mongodb://...); '': none")
+    robot_id: str = param("", "robot id stored with saved cluster sets (a fleet's central database "
+                              "tells whose they are); '': none")
     tf_timeout: float = param(0.2, "seconds to wait for a transform into map_frame before an "
                               "observation is dropped", minimum=0.0)
     queue_size: int = param(10000, "observations waiting to be learnt; more are dropped (and "
                             "counted in ~layer_info)", minimum=1)
+    central_clusters: bool = param(False, "source central: also fold in the cluster sets robots "
+                                          "saved (each cluster one observation at its mean); off "
+                                          "when their detections are replicated too")
 
 
 @dataclass
@@ -85,6 +92,14 @@ class ServerConfig:
     db_url: str
     tf_timeout: float
     queue_size: int
+    robot_id: str = ""
+    central: CentralSourceParams = field(default_factory=CentralSourceParams)  # where from
+    central_clusters: bool = False
+
+    @property
+    def source(self) -> str:
+        """"topic" (the observation topics) or "central" (the fleet database's feed)."""
+        return self.central.source
 
     @classmethod
     def from_params(cls, params: Mapping[str, object]) -> "ServerConfig":
@@ -107,7 +122,12 @@ class ServerConfig:
                      hierarchy=ClassHierarchy(raw.class_hierarchy),
                      class_colours=_colours(raw.class_colours), marker_rate=raw.marker_rate,
                      pair_method=raw.pair_method, pair_max_distance=raw.pair_max_distance,
-                     db_url=raw.db_url, tf_timeout=raw.tf_timeout, queue_size=raw.queue_size)
+                     db_url=raw.db_url, tf_timeout=raw.tf_timeout, queue_size=raw.queue_size,
+                     robot_id=raw.robot_id,
+                     central=CentralSourceParams(raw.source, raw.central_url,
+                                                 raw.central_credentials_file,
+                                                 list(raw.central_topics)),
+                     central_clusters=raw.central_clusters)
         config.check()
         return config
 

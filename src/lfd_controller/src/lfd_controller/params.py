@@ -108,6 +108,8 @@ class LearnRewardConfig(NodeConfig):
     db_url: str = param("", "ros_mongo store URL to load demonstrations from")
     scenario: str = param("", "only demonstrations of this scenario")
     session_id: str = param("", "only database demonstrations recorded with this session id")
+    robot_ids: List[str] = param([], "only database demonstrations recorded by these robots (a "
+                                     "fleet's central database holds every robot's); empty: all")
     kind: str = param("linear", "reward model", choices=("linear", "gp"))
     output: str = param("", "reward file to write (YAML)")
     store_db: bool = param(False, "also store the reward in --db-url")

@@ -1,10 +1,15 @@
 """Learning from what the robot recorded: demonstrations from bags and the database (ros_mongo),
 the learned reward back into the database; the learning itself is `learning.learn_and_save`.
 
+The database may be a fleet's central database (every robot's replicated recordings): each
+database demonstration keeps the robot that recorded it (`demo.meta["robot_id"]`), `robot_ids`
+keeps those of some robots only, and the summary and the stored reward's info count the
+demonstrations per robot (`demonstrations_per_robot`).
+
 Every failure to read or write a source is an LfdError (DemonstrationError when no usable
 demonstration is found), which learn_reward turns into one `ERROR:` line.
 """
-from typing import List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence
 
 import yaml
 from std_msgs.msg import String
@@ -13,26 +18,58 @@ from lfd_controller import ros_demos
 from lfd_controller.demos import Demonstration
 from lfd_controller.errors import DemonstrationError, LfdError
 from lfd_controller.learning import learn_and_save
-from ros_mongo import StoreError, open_store
+from ros_mongo import StoreError, open_store, redact_url
+
+NO_ROBOT = "(no robot id)"  # database demonstrations recorded without a robot id
+FROM_BAGS = "(bags)"        # demonstrations read from bag files
+
+
+def load_database_demos(store, *, scenario: str = "", session_id: str = "",
+                        robot_ids: Sequence[str] = ()) -> List[Demonstration]:
+    """Stored demonstrations, oldest first (of one scenario, session and of some robots, if
+    given), each with the robot that recorded it in `meta["robot_id"]` ("" if none)."""
+    tags = ["demonstration"] + ([scenario] if scenario else [])
+    demos = []
+    for robot_id in list(robot_ids) or [None]:
+        for stored in store.find_messages(topic=ros_demos.DEMO_TOPIC, tags=tags,
+                                          session_id=session_id or None, robot_id=robot_id):
+            demo = ros_demos.from_msg(stored.message())
+            demo.meta["robot_id"] = stored.robot_id or ""
+            demos.append(demo)
+    return demos
 
 
 def load_sources(bags: Sequence[str], db_url: str = "", scenario: str = "",
-                 session_id: str = "") -> List[Demonstration]:
-    """Demonstrations from bag files/folders and the database (of one session, if given)."""
+                 session_id: str = "", robot_ids: Sequence[str] = ()) -> List[Demonstration]:
+    """Demonstrations from bag files/folders and the database (of one session, and recorded by
+    one of `robot_ids`, if given: a fleet's central database holds every robot's)."""
     demos = ros_demos.read_bags(bags) if bags else []
     if db_url:
         try:
             with open_store(db_url) as store:
-                demos += ros_demos.load_demos(store, scenario=scenario or None,
-                                              session_id=session_id or None)
+                demos += load_database_demos(store, scenario=scenario, session_id=session_id,
+                                             robot_ids=robot_ids)
         except StoreError as err:
-            raise DemonstrationError(f"cannot load demonstrations from {db_url}: {err}") from err
+            raise DemonstrationError(f"cannot load demonstrations from {redact_url(db_url)}: "
+                                     f"{err}") from err
     if scenario:
         demos = [d for d in demos if d.scenario.name == scenario]
     if not demos:
         where = f" for scenario {scenario!r}" if scenario else ""
-        raise DemonstrationError(f"no demonstrations found{where}")
+        robots = f" recorded by {', '.join(robot_ids)}" if robot_ids else ""
+        raise DemonstrationError(f"no demonstrations found{where}{robots}")
     return demos
+
+
+def demos_per_robot(demos: Sequence[Demonstration]) -> Dict[str, int]:
+    """How many demonstrations each robot recorded (database ones without a robot id under
+    NO_ROBOT, those from bags under FROM_BAGS), by robot id."""
+    counts: Dict[str, int] = {}
+    for demo in demos:
+        robot = demo.meta.get("robot_id")
+        robot = FROM_BAGS if robot is None else robot or NO_ROBOT
+        counts[robot] = counts.get(robot, 0) + 1
+    return dict(sorted(counts.items()))
 
 
 def store_reward(reward, db_url: str, info: Optional[dict] = None) -> str:
@@ -47,13 +84,18 @@ def store_reward(reward, db_url: str, info: Optional[dict] = None) -> str:
 
 
 def learn_from_sources(bags, db_url: str = "", *, scenario: str = "", session_id: str = "",
-                       kind: str = "linear", output: str, store_db: bool = False, plots: str = "",
-                       seed: int = 0, trim_steps: Optional[int] = 10) -> str:
-    """Load, learn, save (store with `store_db` and a `db_url`, and plot); returns a summary."""
-    demos = load_sources(bags, db_url, scenario, session_id)
+                       robot_ids: Sequence[str] = (), kind: str = "linear", output: str,
+                       store_db: bool = False, plots: str = "", seed: int = 0,
+                       trim_steps: Optional[int] = 10) -> str:
+    """Load, learn, save (store with `store_db` and a `db_url`, and plot); returns a summary
+    whose last line counts the demonstrations per robot (also in the stored reward's info)."""
+    demos = load_sources(bags, db_url, scenario, session_id, robot_ids)
+    per_robot = demos_per_robot(demos)
 
     def store(reward, info):
-        return store_reward(reward, db_url, info)
+        return store_reward(reward, db_url, dict(info, demonstrations_per_robot=per_robot))
 
-    return learn_and_save(demos, kind=kind, output=output, plots=plots, seed=seed,
-                          trim_steps=trim_steps, store=store if store_db and db_url else None)
+    summary = learn_and_save(demos, kind=kind, output=output, plots=plots, seed=seed,
+                             trim_steps=trim_steps, store=store if store_db and db_url else None)
+    robots = ", ".join(f"{robot}: {count}" for robot, count in per_robot.items())
+    return f"{summary}\ndemonstrations per robot: {robots}"

@@ -8,6 +8,11 @@ vector with each label's. Room numbers identify rooms but barely move a sentence
 ("classroom 101" is as close to classroom_102 as to classroom_101), so, as in the word-level
 method where numbers match by spelling only, a number of the phrase that a label carries adds
 `number_weight` to its score and a label that carries only other numbers loses it.
+Two more parts (weights chosen on the dev phrases, bench/nlp_region_accuracy.py --dev): the cosine
+with the label's bare name text counts `name_text_weight` against the expanded text's
+1 - `name_text_weight` (WordNet's senses of a proper name mislead: "grasp" is no robotics lab), and
+`name_spelling_weight` x text_similarity.name_spelling_score adds an exact / fuzzy name match
+("skirkanitch", "Charity's", "towne 311").
 It is the region recommender's method when the embedding service serves phrase vectors (backend
 "sentence"); with word2vec the word-level `RegionRecommender` is better. Same interface:
 `set_regions`, `recommend` -> `Recommendation`.
@@ -20,7 +25,7 @@ from region_search.corpora import WordNet
 from region_search.embeddings import EmbeddedWords, phrase_tokens
 from region_search.errors import EmbeddingError
 from region_search.recommender import ExpansionWeights, LabelExpander, RankedRegion, Recommendation, Region
-from region_search.text_similarity import is_number, tokenize
+from region_search.text_similarity import content_words, is_number, name_spelling_score, tokenize
 
 __all__ = ["PhraseRegionRecommender"]
 
@@ -37,18 +42,25 @@ class PhraseRegionRecommender:
         weights: expansion weights; here they only order the added words (strongest first).
         number_weight: added for a phrase number the label carries, subtracted from a label that
             carries numbers, none of them the phrase's (0: numbers count as text only).
+        name_text_weight: share of the cosine with the bare name text (the rest: the expanded
+            text); 0: the expanded text only.
+        name_spelling_weight: weight of the name-spelling match (0: none).
     """
 
     method = "phrase"
 
     def __init__(self, embed_phrases: EmbedPhrases, *, wordnet: Optional[WordNet] = None,
-                 weights: ExpansionWeights = ExpansionWeights(), number_weight: float = 0.2):
+                 weights: ExpansionWeights = ExpansionWeights(), number_weight: float = 0.2,
+                 name_text_weight: float = 0.3, name_spelling_weight: float = 0.2):
         self.embed_phrases = embed_phrases
         self.number_weight = number_weight
+        self.name_text_weight = name_text_weight
+        self.name_spelling_weight = name_spelling_weight
         self.expander = LabelExpander(wordnet, weights)
         self.regions: List[Region] = []
         self._texts: Dict[str, str] = {}
         self._vectors: Dict[str, np.ndarray] = {}
+        self._name_vectors: Dict[str, np.ndarray] = {}
 
     def label_text(self, name: str) -> str:
         """The text a label is encoded as: its name words, then its WordNet words."""
@@ -62,12 +74,18 @@ class PhraseRegionRecommender:
         names = sorted({region.name for region in regions} - set(self._vectors))
         if names:
             texts = [self.label_text(name) for name in names]
-            embedded = self.embed_phrases(texts)
-            if len(embedded.vectors) != len(names):
-                raise EmbeddingError(f"{len(names)} label texts gave {len(embedded.vectors)} vectors")
-            for name, text, vector in zip(names, texts, embedded.vectors):
+            bare = [" ".join(tokenize(name)) for name in names]
+            with_names = texts + (bare if self.name_text_weight else [])
+            embedded = self.embed_phrases(with_names)
+            if len(embedded.vectors) != len(with_names):
+                raise EmbeddingError(f"{len(with_names)} label texts gave "
+                                     f"{len(embedded.vectors)} vectors")
+            vectors = [np.asarray(v, dtype=np.float64) for v in embedded.vectors]
+            for index, (name, text) in enumerate(zip(names, texts)):
                 self._texts[name] = text
-                self._vectors[name] = np.asarray(vector, dtype=np.float64)
+                self._vectors[name] = vectors[index]
+                self._name_vectors[name] = (vectors[len(names) + index] if self.name_text_weight
+                                            else vectors[index])
         self.regions = list(regions)
 
     def recommend(self, phrase: str, top_k: int = 3) -> Recommendation:
@@ -76,11 +94,17 @@ class PhraseRegionRecommender:
         query = self.embed_phrases([phrase])
         vector = np.asarray(query.vectors[0], dtype=np.float64)
         numbers = {t for t in tokenize(phrase) if is_number(t)}
+        words = content_words(phrase)
         scores, explanations = {}, {}
         for name in {r.name for r in self.regions}:
-            cosine = float(self._vectors[name] @ vector)
+            share = self.name_text_weight
+            cosine = ((1.0 - share) * float(self._vectors[name] @ vector)
+                      + share * float(self._name_vectors[name] @ vector))
             bonus, why = self._number_bonus(numbers, name)
-            scores[name] = cosine + bonus
+            spelled = name_spelling_score(words, name) if self.name_spelling_weight else 0.0
+            if spelled > 0:
+                why += f"; name spelled {spelled:.2f} (+{self.name_spelling_weight * spelled:.2f})"
+            scores[name] = cosine + bonus + self.name_spelling_weight * spelled
             explanations[name] = self._explain(name, cosine) + why
         ranked = sorted(self.regions, key=lambda r: (-scores[r.name], r.name, r.x, r.y))
         if top_k > 0:

@@ -8,6 +8,9 @@
 - `RegionRecommender`: ranks regions for a phrase. Each query word finds its best match among a
   label's (weighted) words, by embedding cosine or by spelling (label-name words only: "towne",
   room numbers); the score is the SIF-weighted mean of these matches over the query's words.
+  A share of it (`name_text_weight`, 0.5, chosen on the dev phrases by
+  bench/nlp_region_accuracy.py --dev) is this score on the label's name words alone, so that
+  WordNet's senses of a name ("grasp", "far") do not drown the name itself.
   Word vectors come from a callable (the embedding service's client, or a model in-process).
 """
 import json
@@ -186,12 +189,14 @@ class RegionRecommender:
             "coffee"), counted with their expansion weight.
         method: "align" (each query word's best label word) or "mean" (cosine of weighted means).
         weights: how much expanded words count.
+        name_text_weight: with `wordnet`, the share of the score computed on the label's name
+            words alone (the rest: on the expanded words); 0: the expanded words only.
     """
 
     def __init__(self, embed_words: Optional[EmbedWords], *, wordnet: Optional[WordNet] = None,
                  use_spelling: bool = True, expand_query: bool = False, method: str = "align",
                  weights: ExpansionWeights = ExpansionWeights(), min_spelling: float = 0.5,
-                 hubness: bool = False):
+                 hubness: bool = False, name_text_weight: float = 0.5):
         if method not in ("align", "mean"):
             raise EmbeddingError(f"unknown method {method!r}; use 'align' or 'mean'")
         self.embed_words = embed_words
@@ -207,6 +212,12 @@ class RegionRecommender:
         # label -> (words, weights, origins, name tokens)
         self._labels: Dict[str, Tuple[List[str], np.ndarray, List[str], List[str]]] = {}
         self._vectors: Dict[str, Optional[np.ndarray]] = {}
+        self.name_text_weight = name_text_weight if wordnet is not None else 0.0
+        # The same ranking on the label names alone (its share: name_text_weight).
+        self._names: Optional[RegionRecommender] = None
+        if self.name_text_weight:
+            self._names = RegionRecommender(embed_words, use_spelling=use_spelling, method=method,
+                                            min_spelling=min_spelling, hubness=hubness)
 
     def set_regions(self, regions: Sequence[Region]) -> None:
         """Use these regions from now on (label words are expanded and embedded once)."""
@@ -218,6 +229,8 @@ class RegionRecommender:
             self._labels[name] = (ordered, np.array([words[w][0] for w in ordered]),
                                   [words[w][1] for w in ordered], tokenize(name))
         self.regions = list(regions)
+        if self._names is not None:
+            self._names.set_regions(regions)
         label_set = tuple(sorted({r.name for r in regions}))
         if self.hubness and label_set != self._hub_labels:  # only when the labels change
             self._hub = self._hub_levels(list(label_set))
@@ -250,6 +263,22 @@ class RegionRecommender:
 
     def recommend(self, phrase: str, top_k: int = 3) -> Recommendation:
         """The `top_k` best regions (all when top_k <= 0), best first; EmptyPhraseError if empty."""
+        scored, query = self._scores(phrase)
+        if self._names is not None:
+            share = self.name_text_weight
+            names, _ = self._names._scores(phrase, query)  # the same query vectors, no new call
+            scored = {name: ((1.0 - share) * score + share * names[name][0],
+                             f"{why}; on the name alone {names[name][0]:.2f} (share {share:.2f})")
+                      for name, (score, why) in scored.items()}
+        ranked = sorted(self.regions, key=lambda r: (-scored[r.name][0], r.name, r.x, r.y))
+        if top_k > 0:
+            ranked = ranked[:top_k]
+        results = [RankedRegion(r, scored[r.name][0], scored[r.name][1]) for r in ranked]
+        return Recommendation(phrase, results, list(query.oov), [n for n in query.notes if n])
+
+    def _scores(self, phrase: str, embedded_query: Optional[EmbeddedWords] = None):
+        """({label: (score, explanation)}, the query's EmbeddedWords); `embedded_query`: the
+        phrase's words already embedded (used when there is no query expansion)."""
         tokens = phrase_tokens(phrase)
         everything = tokenize(phrase)
         positions = [i for i, t in enumerate(everything) if t not in STOPWORDS]
@@ -259,7 +288,10 @@ class RegionRecommender:
             by_position = self.expander.expand_words(everything)
             expansions = [by_position[i] for i in positions]
         extra = sorted({w for e in expansions for w in e} - set(tokens))
-        if self.embed_words is not None:
+        if self.embed_words is not None and embedded_query is not None and not extra:
+            query = embedded_query
+            rows = np.where(query.found[:, None], query.vectors, 0.0)
+        elif self.embed_words is not None:
             embedded = self.embed_words(list(tokens) + extra)
             query = EmbeddedWords(tokens, embedded.vectors[:len(tokens)],
                                   embedded.weights[:len(tokens)], embedded.notes[:len(tokens)],
@@ -272,11 +304,7 @@ class RegionRecommender:
         row_words = list(tokens) + extra
         scored = {name: self._score(query, expansions, row_words, rows, name)
                   for name in {r.name for r in self.regions}}
-        ranked = sorted(self.regions, key=lambda r: (-scored[r.name][0], r.name, r.x, r.y))
-        if top_k > 0:
-            ranked = ranked[:top_k]
-        results = [RankedRegion(r, scored[r.name][0], scored[r.name][1]) for r in ranked]
-        return Recommendation(phrase, results, list(query.oov), [n for n in query.notes if n])
+        return scored, query
 
     def _matches(self, row_words, rows, name) -> Tuple[np.ndarray, np.ndarray]:
         """(best weighted similarity, index of the label word) of every row word to a label."""

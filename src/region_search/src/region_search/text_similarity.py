@@ -5,6 +5,8 @@
 - `content_words` drops English function words (the usual stop-word list).
 - `spelling_similarity(a, b)`: Dice coefficient of padded character trigrams in [0, 1]; numbers
   match only exactly (room 321 is not room 312).
+- `name_spelling_score`: how much of a phrase spells a label's name ("skirkanitch hall" ->
+  to_skirkanich), the name-matching stage both ranking methods add to their vector scores.
 - `SpellingIndex`: the vocabulary word spelled most like a given word (an inverted trigram index),
   the last fallback for a word without a vector.
 """
@@ -13,7 +15,7 @@ from collections import defaultdict
 from typing import Dict, FrozenSet, Iterable, List, Optional, Sequence, Tuple
 
 __all__ = ["STOPWORDS", "tokenize", "content_words", "is_number", "trigrams",
-           "spelling_similarity", "SpellingIndex", "string_baseline_score"]
+           "spelling_similarity", "SpellingIndex", "string_baseline_score", "name_spelling_score"]
 
 # The common English stop-word list (function words only; no domain words).
 STOPWORDS: FrozenSet[str] = frozenset("""
@@ -70,6 +72,21 @@ def string_baseline_score(query_tokens: Sequence[str], label_tokens: Sequence[st
         return 0.0
     return sum(max(spelling_similarity(q, t) for t in label_tokens)
                for q in query_tokens) / len(query_tokens)
+
+
+def name_spelling_score(query_words: Sequence[str], label: str,
+                        min_similarity: float = 0.6) -> float:
+    """Mean over the phrase's content words of the best spelling similarity to a word of the
+    label's name (stop words of the name skipped: "to_skirkanich"); a similarity below
+    `min_similarity` counts 0, numbers match only exactly. In [0, 1]."""
+    names = content_words(label)
+    if not query_words or not names:
+        return 0.0
+    total = 0.0
+    for word in query_words:
+        best = max(spelling_similarity(word, name) for name in names)
+        total += best if best >= min_similarity else 0.0
+    return total / len(query_words)
 
 
 class SpellingIndex:

@@ -19,7 +19,15 @@ import rospkg
 import rospy
 
 from robot_common.params import NodeConfig
-from robot_demo.chapters import crowd_map, data_api, demonstrations, object_layers, region_search, robot
+from robot_demo.chapters import (
+    crowd_map,
+    data_api,
+    demonstrations,
+    fleet,
+    object_layers,
+    region_search,
+    robot,
+)
 from robot_sim.configs import load_config_file
 from ros_harness import LaunchSet, PouchDBServer, RosCore, RosLaunch, free_port
 
@@ -28,7 +36,7 @@ __all__ = ["CHAPTERS", "Demo", "workspace_root", "parse_args", "main"]
 ConfigT = TypeVar("ConfigT", bound=NodeConfig)
 
 CHAPTERS = {module.__name__.rsplit(".", 1)[-1]: module for module in (
-    robot, data_api, object_layers, region_search, crowd_map, demonstrations)}
+    robot, data_api, object_layers, region_search, crowd_map, demonstrations, fleet)}
 
 
 def workspace_root() -> Path:

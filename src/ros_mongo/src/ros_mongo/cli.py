@@ -4,22 +4,38 @@
     ros_mongo_bag export out.bag --db-url mongodb://127.0.0.1:27017/robot_data --query "tags lidar"
     ros_mongo_bag info --db-url http://127.0.0.1:5984/robot_data
     ros_mongo_bag setup --db-url http://admin@127.0.0.1:5984/robot_data --db-credentials-file ~/.admin
+    ros_mongo_bag migrate --from-url mongodb://127.0.0.1:27017 --db-url mongodb://127.0.0.1:27017/test_database
+    ros_mongo_bag convert --query "tags lidar"     (bag_converter.launch: the original's defaults)
 
 Credentials: keep --db-url password-free (a password on the command line shows in `ps` and logs)
 and give it through --db-credentials-file (one line, 'user:password' or 'password') or the
 environment (ROS_MONGO_DB_PASSWORD, ROS_MONGO_DB_USER). The URL itself may also come from
 ROS_MONGO_DB_URL. `setup` creates the indexes / design documents reads use; run it once with an
 admin account, so that robots need only document-write rights and readers only read rights.
+`migrate` reads the original mongodb_api's documents (test_database.posts) into today's layout,
+saying per field what it reconstructed and what the original never stored; a re-run stores
+nothing twice and rewrites nothing. `convert` is the original bag_converter: the original global
+parameters where_to_write (write_bag: export, write_database: import), bag_name, server_ip, port
+and session_id are honoured when set on the ROS master (each with a deprecation warning).
 Exits 0 on success, 1 with one "ERROR: ..." line otherwise.
 """
 import argparse
 import os
 import re
 import sys
+from pathlib import Path
 from typing import List, Optional
 
 from ros_mongo.bagio import BATCH_BYTES, export_bag, import_bag
 from ros_mongo.errors import StoreError
+from ros_mongo.legacy import (
+    DEFAULT_BAG_NAME,
+    LEGACY_COLLECTION,
+    LEGACY_DATABASE,
+    WRITE_BAG,
+    legacy_overrides,
+    migrate_documents,
+)
 from ros_mongo.query import parse_query, query_from_mapping
 from ros_mongo.store import open_store
 from ros_mongo.urls import PASSWORD_ENV, password_in_url, redact_url
@@ -59,6 +75,26 @@ def parse_args(argv: List[str]) -> argparse.Namespace:
     down.add_argument("--end-time", type=float, help="receive time until (s)")
     down.add_argument("--compression", choices=["none", "bz2", "lz4"], default="none")
     down.add_argument("--force", action="store_true", help="overwrite an existing bag")
+    move = commands.add_parser("migrate", help="read the original mongodb_api's documents into today's "
+                                               "layout")
+    move.add_argument("--from-url", default="mongodb://127.0.0.1:27017",
+                      help="the original's MongoDB (its server_ip and port), password-free")
+    move.add_argument("--from-credentials-file", default=None,
+                      help="file holding 'user:password' or 'password' for --from-url")
+    move.add_argument("--from-db", default=LEGACY_DATABASE, help=f"its database (default {LEGACY_DATABASE})")
+    move.add_argument("--from-collection", default=LEGACY_COLLECTION,
+                      help=f"its collection (default {LEGACY_COLLECTION})")
+    move.add_argument("--robot-id", help="robot id for the migrated messages (the original stored none)")
+    convert = commands.add_parser("convert", help="the original bag_converter: export (write_bag) or "
+                                                  "import (write_database) by its global parameters")
+    convert.add_argument("--query", default="", help="the query to export ('tags lidar')")
+    convert.add_argument("--direction", choices=["", "export", "import"], default="",
+                         help="default: the global where_to_write, else export")
+    convert.add_argument("--bag", default="", help="the bag (default: <bag-dir>/<global bag_name or "
+                                                   f"{DEFAULT_BAG_NAME}>)")
+    convert.add_argument("--bag-dir", default="", help="where the bag is (default $ROS_HOME/ros_mongo/bag)")
+    convert.add_argument("--tags", nargs="*", default=[], help="import: tags for every message")
+    convert.add_argument("--force", action="store_true", help="export: overwrite an existing bag")
     commands.add_parser("info", help="stored topics and message counts")
     commands.add_parser("setup", help="create the indexes / design documents (admin account, once)")
     for sub in commands.choices.values():  # options work before or after the command
@@ -75,8 +111,83 @@ def _export_query(args: argparse.Namespace):
                "type": query.msg_type, "session_id": args.session_id or query.session_id,
                "robot_id": query.robot_id, "fields": query.fields or None,
                "start_time": args.start_time if args.start_time is not None else query.start_time,
-               "end_time": args.end_time if args.end_time is not None else query.end_time}
+               "end_time": args.end_time if args.end_time is not None else query.end_time,
+               "author": query.author}
     return query_from_mapping(mapping)
+
+
+def _master_params(names) -> dict:
+    """The original global parameters set on the ROS master (none when no master is reachable)."""
+    try:
+        import rosgraph
+        master = rosgraph.Master("/ros_mongo_bag")
+        values = {}
+        for name in names:
+            if master.hasParam(name):
+                values[name] = master.getParam(name)
+        return values
+    except Exception:  # noqa: BLE001 - no master: the command line alone decides
+        return {}
+
+
+def _convert_args(args: argparse.Namespace) -> argparse.Namespace:
+    """The convert command as an export or import, with the original's defaults and globals."""
+    from robot_common.paths import ros_home
+
+    names = ("server_ip", "port", "bag_name", "where_to_write", "session_id")
+    given = {"db_url": args.db_url, "direction": args.direction, "bag": args.bag}
+    defaults = {"db_url": DEFAULT_URL, "direction": "", "bag": ""}
+    overrides, warnings = legacy_overrides("converter", _master_params(names), given, defaults)
+    for line in warnings:
+        print(f"WARNING: {line}", file=sys.stderr)
+    args.db_url = overrides.get("db_url", args.db_url)
+    args.command = args.direction or overrides.get("direction") or "export"
+    if args.command not in ("export", "import"):
+        raise StoreError(f"where_to_write must be '{WRITE_BAG}' or 'write_database', got "
+                         f"{args.command!r}")
+    bag_dir = Path(args.bag_dir) if args.bag_dir else ros_home() / "ros_mongo" / "bag"
+    bag = Path(args.bag or overrides.get("bag") or DEFAULT_BAG_NAME)
+    bag = bag if bag.is_absolute() else bag_dir / bag
+    if args.command == "export":
+        if not args.query.strip():
+            raise StoreError("no query given: the bag converter exports with one, e.g. query:='tags lidar'")
+        bag.parent.mkdir(parents=True, exist_ok=True)
+        return _namespace(args, bag=str(bag), topics=None, tags=None, session_id=None, start_time=None,
+                          end_time=None, compression="none")
+    return _namespace(args, bags=[str(bag)], topics=None, session_id=overrides.get("session_id"),
+                      robot_id=None, batch_mb=BATCH_BYTES / 2 ** 20)
+
+
+def _namespace(args: argparse.Namespace, **values) -> argparse.Namespace:
+    merged = dict(vars(args))
+    merged.update(values)
+    return argparse.Namespace(**merged)
+
+
+def _migrate(args: argparse.Namespace, store, progress: bool) -> None:
+    import pymongo
+    from tqdm import tqdm
+
+    from ros_mongo.urls import scrub, with_credentials
+
+    # only its own credentials file: the environment's password is the target's
+    url = with_credentials(args.from_url, credentials_file=args.from_credentials_file, environ={})
+    client = pymongo.MongoClient(url, serverSelectionTimeoutMS=10000)
+    try:
+        collection = client[args.from_db][args.from_collection]
+        total = collection.estimated_document_count()
+        print(f"migrating {total} documents of {redact_url(args.from_url)} "
+              f"{args.from_db}.{args.from_collection} into {store.url}")
+        with tqdm(total=total, unit="doc", desc="migrate", disable=not progress) as bar:
+            report = migrate_documents(collection.find().sort("_id", 1), store, robot_id=args.robot_id,
+                                       on_progress=bar.update)
+    except pymongo.errors.PyMongoError as err:
+        raise StoreError(f"cannot read {redact_url(args.from_url)} {args.from_db}.{args.from_collection}: "
+                         f"{type(err).__name__}: {scrub(str(err), url)}") from None
+    finally:
+        client.close()
+    for line in report.lines():
+        print(line)
 
 
 def run(args: argparse.Namespace) -> None:
@@ -84,8 +195,12 @@ def run(args: argparse.Namespace) -> None:
     if password_in_url(args.db_url):
         print(f"WARNING: the database URL {redact_url(args.db_url)} holds a secret, which shows in `ps` "
               f"and logs: use --db-credentials-file or ${PASSWORD_ENV}", file=sys.stderr)
+    if args.command == "convert":
+        args = _convert_args(args)
     with open_store(args.db_url, credentials_file=args.db_credentials_file) as store:
-        if args.command == "setup":
+        if args.command == "migrate":
+            _migrate(args, store, progress)
+        elif args.command == "setup":
             if store.ensure_indexes():
                 print(f"{store.url}: indexes ready")
             else:

@@ -6,7 +6,7 @@ digits, then a random suffix, so ids sort by receive time):
 
     _id, kind="message", topic, type, md5sum, receive_time (float s), receive_secs, receive_nsecs,
     header_stamp (float s or null), tags (list), session_id, robot_id, callerid (the publisher),
-    size (bytes),
+    size (bytes), author (only when set: the original mongodb_api's `author`),
     msg (the decoded fields, or null), fields_dropped (true when msg was left out to fit),
     and the bytes: `raw` inline (CouchDB base64 / MongoDB binary) up to the blob threshold,
     else a CouchDB attachment `raw` or a GridFS file under the message id (MongoDB: blob=true).
@@ -48,7 +48,7 @@ __all__ = ["META_KEYS", "Condition", "query_conditions", "to_selector", "message
 
 #: Top-level keys of a stored message besides the decoded fields ("msg") and the bytes ("raw").
 META_KEYS = ("_id", "topic", "type", "md5sum", "receive_time", "receive_secs", "receive_nsecs",
-             "header_stamp", "tags", "session_id", "robot_id", "callerid", "size")
+             "header_stamp", "tags", "session_id", "robot_id", "callerid", "size", "author")
 
 
 class Condition(NamedTuple):
@@ -75,6 +75,8 @@ def query_conditions(query: Query) -> List[Condition]:
         conditions.append(Condition("session_id", "$eq", query.session_id))
     if query.robot_id:
         conditions.append(Condition("robot_id", "$eq", query.robot_id))
+    if query.author:
+        conditions.append(Condition("author", "$eq", query.author))
     if query.start_time is not None:
         conditions.append(Condition("receive_time", "$gte", query.start_time))
     if query.end_time is not None:
@@ -154,12 +156,15 @@ def _holds(value: float, op: str, bound: float) -> bool:
 
 def message_doc(record: MessageRecord) -> dict:
     """The stored form of a message record, without its bytes (the backend adds those)."""
-    return {"_id": record.id, "kind": "message", "topic": record.topic, "type": record.msg_type,
+    doc = {"_id": record.id, "kind": "message", "topic": record.topic, "type": record.msg_type,
             "md5sum": record.md5sum, "receive_time": record.receive_time,
             "receive_secs": record.receive_secs, "receive_nsecs": record.receive_nsecs,
             "header_stamp": record.header_stamp, "tags": list(record.tags),
             "session_id": record.session_id, "robot_id": record.robot_id,
             "callerid": record.callerid, "size": len(record.raw), "msg": record.fields}
+    if record.author:
+        doc["author"] = record.author
+    return doc
 
 
 def stored_message(doc: Dict[str, Any], raw: Optional[bytes], load_raw: Callable[[str], bytes],
@@ -174,7 +179,8 @@ def stored_message(doc: Dict[str, Any], raw: Optional[bytes], load_raw: Callable
     return StoredMessage(**identity, header_stamp=doc.get("header_stamp"), tags=doc.get("tags") or [],
                          session_id=doc.get("session_id"), robot_id=doc.get("robot_id"),
                          fields=doc.get("msg"), size=int(doc.get("size", len(raw) if raw is not None else 0)),
-                         raw=raw, load_raw=load_raw, resolve=resolve, callerid=doc.get("callerid") or "")
+                         raw=raw, load_raw=load_raw, resolve=resolve, callerid=doc.get("callerid") or "",
+                         author=doc.get("author"))
 
 
 def topic_doc(info: TopicInfo) -> dict:

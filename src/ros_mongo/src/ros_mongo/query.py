@@ -7,6 +7,7 @@ equality, a mapping may use $eq $ne $gt $gte $lt $lte $in $nin $exists, and a tw
 "NaN"/"Infinity") is defined once, the same for both backends: see `ros_mongo.documents`.
 Range bounds are numbers or strings, all of one kind per field.
 """
+import logging
 import math
 import re
 from dataclasses import dataclass, field
@@ -14,11 +15,20 @@ from typing import Any, Dict, List, Optional, Sequence, Union
 
 from ros_mongo.errors import QueryError
 
-__all__ = ["Query", "parse_query", "QUERY_KEYS"]
+__all__ = ["Query", "parse_query", "QUERY_KEYS", "original_words"]
+
+log = logging.getLogger(__name__)
 
 OPERATORS = ("$eq", "$ne", "$gt", "$gte", "$lt", "$lte", "$in", "$nin", "$exists")
-QUERY_KEYS = ("topic", "topics", "type", "msg_type", "tags", "session_id", "robot_id",
+QUERY_KEYS = ("topic", "topics", "type", "msg_type", "tags", "session_id", "robot_id", "author",
               "start_time", "end_time", "fields")
+#: keys whose value in the original "<key> <value>" form is a list
+_LIST_KEYS = ("tags", "topic", "topics")
+_TIME_KEYS = ("start_time", "end_time")
+#: the original form's word separators: what is not a letter, digit or "_" (as the original's
+#: re.sub('[^\\w]', ' ', query)), except "/", "." and "-", which today's values hold (topic and
+#: type names, times, session ids)
+_SEPARATORS = re.compile(r"[^\w/.\-]+")
 _PATH = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.([A-Za-z_][A-Za-z0-9_]*|[0-9]+))*$")
 _SCALARS = (str, int, float, bool, type(None))
 
@@ -35,17 +45,20 @@ class Query:
     start_time: Optional[float] = None
     end_time: Optional[float] = None
     fields: Dict[str, Dict[str, Any]] = field(default_factory=dict)
+    author: Optional[str] = None
 
     @classmethod
     def build(cls, *, topic: Union[str, Sequence[str], None] = None, msg_type: Optional[str] = None,
               tags: Union[str, Sequence[str], None] = None, session_id: Optional[str] = None,
               robot_id: Optional[str] = None, start_time: Optional[float] = None,
-              end_time: Optional[float] = None, fields: Optional[Dict[str, Any]] = None) -> "Query":
+              end_time: Optional[float] = None, fields: Optional[Dict[str, Any]] = None,
+              author: Optional[str] = None) -> "Query":
         """A validated query (QueryError names the offending value)."""
         query = cls(topics=_names("topic", topic), msg_type=_text("type", msg_type),
                     tags=_names("tags", tags), session_id=_text("session_id", session_id),
                     robot_id=_text("robot_id", robot_id), start_time=_time("start_time", start_time),
-                    end_time=_time("end_time", end_time), fields=_fields(fields))
+                    end_time=_time("end_time", end_time), fields=_fields(fields),
+                    author=_text("author", author))
         if query.start_time is not None and query.end_time is not None \
                 and query.start_time > query.end_time:
             raise QueryError(f"start_time {query.start_time} is after end_time {query.end_time}")
@@ -56,7 +69,8 @@ class Query:
         starts = [t for t in (self.start_time, start_time) if t is not None]
         ends = [t for t in (self.end_time, end_time) if t is not None]
         return Query(self.topics, self.msg_type, self.tags, self.session_id, self.robot_id,
-                     max(starts) if starts else None, min(ends) if ends else None, dict(self.fields))
+                     max(starts) if starts else None, min(ends) if ends else None, dict(self.fields),
+                     self.author)
 
     def describe(self) -> str:
         parts = [f"{key}={value!r}" for key, value in self.__dict__.items() if value not in (None, {}, [])]
@@ -64,27 +78,53 @@ class Query:
 
 
 def parse_query(text: str) -> Query:
-    """A query from text: a YAML/JSON mapping of QUERY_KEYS, or the original two-word form
-    "<key> <value>" (e.g. "tags lidar"); empty text means all messages."""
+    """A query from text: a YAML/JSON mapping of QUERY_KEYS, or the original form "<key> <value>"
+    ("tags lidar", "author ServiceRobot", also "tags:lidar", "tags=lidar"): punctuation separates
+    words and words after the first two are ignored (with a warning), as the original did; empty
+    text means all messages."""
     import yaml
 
     text = (text or "").strip()
     if not text:
         return Query()
-    words = text.split()
-    if len(words) == 2 and re.match(r"^[A-Za-z_]\w*$", words[0]):
-        key, value = words
-        value = [value] if key in ("tags", "topic", "topics") else value
-        return query_from_mapping({key: value})
+    structured = text[0] in "{["  # meant as YAML/JSON: its errors are reported, not re-read as words
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as err:
-        raise QueryError(f"query is neither a YAML/JSON mapping nor '<key> <value>': {text!r} "
-                         f"({str(err).splitlines()[0]})") from None
-    if not isinstance(data, dict):
+        if structured:
+            raise QueryError(f"query is neither a YAML/JSON mapping nor '<key> <value>': {text!r} "
+                             f"({str(err).splitlines()[0]})") from None
+        data = None
+    if isinstance(data, dict):
+        return query_from_mapping(data)
+    if structured:
         raise QueryError(f"query must be a mapping of {', '.join(QUERY_KEYS)} "
                          f"(or '<key> <value>'), got {text!r}")
-    return query_from_mapping(data)
+    words = original_words(text)
+    if len(words) < 2:
+        raise QueryError(f"query must be a YAML/JSON mapping of {', '.join(QUERY_KEYS)} or "
+                         f"'<key> <value>' (e.g. 'tags lidar'), got {text!r}")
+    if len(words) > 2:
+        log.warning("query %r: words after the first two ignored, as the original did: %s", text,
+                    " ".join(words[2:]))
+    return _original_form(words[0], words[1])
+
+
+def original_words(text: str) -> List[str]:
+    """The words of an original-form query: punctuation (but "/", ".", "-") separates words."""
+    return _SEPARATORS.sub(" ", text or "").split()
+
+
+def _original_form(key: str, value: str) -> Query:
+    if key not in QUERY_KEYS or key == "fields":
+        raise QueryError(f"unknown query key {key!r} in '<key> <value>'; known: "
+                         f"{', '.join(k for k in QUERY_KEYS if k != 'fields')}")
+    if key in _TIME_KEYS:
+        try:
+            return query_from_mapping({key: float(value)})
+        except ValueError:
+            raise QueryError(f"{key} must be a number of seconds, got {value!r}") from None
+    return query_from_mapping({key: [value] if key in _LIST_KEYS else value})
 
 
 def query_from_mapping(data: Dict[str, Any]) -> Query:
@@ -96,7 +136,8 @@ def query_from_mapping(data: Dict[str, Any]) -> Query:
     return Query.build(topic=topics, msg_type=data.get("type", data.get("msg_type")),
                        tags=data.get("tags"), session_id=data.get("session_id"),
                        robot_id=data.get("robot_id"), start_time=data.get("start_time"),
-                       end_time=data.get("end_time"), fields=data.get("fields"))
+                       end_time=data.get("end_time"), fields=data.get("fields"),
+                       author=data.get("author"))
 
 
 def _text(name: str, value) -> Optional[str]:

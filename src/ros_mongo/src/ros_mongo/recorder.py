@@ -50,6 +50,7 @@ _Key = Tuple[str, str, str, str]  # topic, type, md5sum, publisher (callerid)
 #: Bytes a queued message costs beyond its payload (the bytes object, the queue entry, its tuple
 #: and numbers, measured with sys.getsizeof on CPython 3.8-3.11).
 ITEM_OVERHEAD = 200
+COUNTERS = ("received", "stored", "dropped", "rejected", "quarantined", "spooled", "writer_restarts")
 
 
 class Recorder:
@@ -63,7 +64,7 @@ class Recorder:
             more go to the spool.
         retry_period: seconds between probes of a failing database (doubling up to 10x).
         writers: writer threads.
-        session_id, robot_id, tags: stored with every message; topic_tags adds tags per topic.
+        session_id, robot_id, tags, author: stored with every message; topic_tags adds tags per topic.
         quarantine_path: where refused documents go (default: the spool path + ".quarantine").
     """
 
@@ -71,7 +72,7 @@ class Recorder:
                  batch_period: float = 0.2, max_queue_bytes: int = 1 << 30, retry_period: float = 1.0,
                  writers: int = 2, session_id: Optional[str] = None, robot_id: Optional[str] = None,
                  tags: Sequence[str] = (), topic_tags: Optional[Dict[str, Sequence[str]]] = None,
-                 quarantine_path: Optional[str] = None):
+                 quarantine_path: Optional[str] = None, author: Optional[str] = None):
         if batch_size < 1 or batch_period <= 0 or max_queue_bytes < 1 or retry_period <= 0 or writers < 1:
             raise ValueError(f"batch_size, batch_period, max_queue_bytes, retry_period and writers must "
                              f"be positive, got {batch_size!r}, {batch_period!r}, {max_queue_bytes!r}, "
@@ -83,6 +84,7 @@ class Recorder:
         self.batch_size, self.batch_period = int(batch_size), float(batch_period)
         self.max_queue_bytes, self.retry_period = int(max_queue_bytes), float(retry_period)
         self.session_id, self.robot_id, self.tags = session_id, robot_id, list(tags)
+        self.author = author or None
         self.topic_tags = {topic: list(t) for topic, t in (topic_tags or {}).items()}
         self._cond = threading.Condition()
         self._queue: Deque[tuple] = deque()
@@ -101,8 +103,7 @@ class Recorder:
         self.db_ok, self._next_probe, self._failures = True, 0.0, 0
         self.fault = ""         # the current fault (the server's reason), "" when writes work
         self.last_fault = ""    # the latest fault, kept after it cleared
-        self.received = self.stored = self.dropped = self.rejected = self.spooled = 0
-        self.quarantined = self.writer_restarts = 0
+        self._counts: Dict[str, int] = dict.fromkeys(COUNTERS, 0)
 
     # -- called from subscriber threads -----------------------------------------------------------
     def receive(self, topic: str, raw: bytes, receive: genpy.Time, msg_type: str, md5sum: str,
@@ -111,7 +112,7 @@ class Recorder:
         key = (topic, msg_type, md5sum, callerid)
         cost = len(raw) + ITEM_OVERHEAD
         with self._cond:
-            self.received += 1
+            self._counts["received"] += 1      # one key, only ever written under _cond
             if key not in self._topics:
                 info = TopicInfo(topic, msg_type, md5sum, definition, bool(latching), callerid,
                                  self.robot_id or "")
@@ -145,10 +146,11 @@ class Recorder:
     def counts(self) -> Dict[str, int]:
         """received, stored, dropped, rejected, quarantined, spooled (ever), spool_pending, queued,
         queued_bytes, writer_restarts."""
-        return {"received": self.received, "stored": self.stored, "dropped": self.dropped,
-                "rejected": self.rejected, "quarantined": self.quarantined, "spooled": self.spooled,
-                "spool_pending": self.spool.pending_records, "queued": len(self._queue),
-                "queued_bytes": self._queued_bytes, "writer_restarts": self.writer_restarts}
+        with self._count_lock:
+            counts = dict(self._counts)
+        counts.update(spool_pending=self.spool.pending_records, queued=len(self._queue),
+                      queued_bytes=self._queued_bytes)
+        return counts
 
     # -- the writers ---------------------------------------------------------------------------
     def start(self) -> "Recorder":
@@ -284,7 +286,9 @@ class Recorder:
         size = sum(len(item[1]) + ITEM_OVERHEAD for item in items if len(item) > 1)
         messages = sum(len(item) > 1 for item in items)
         with self._cond:
-            if self._queued_bytes + size <= self.max_queue_bytes and not self._stopping:
+            # stopping: kept (and retried) until the stop's deadline, as the server may be back
+            if (self._queued_bytes + size <= self.max_queue_bytes
+                    and (not self._stopping or time.monotonic() < self._deadline)):
                 self._queue.extendleft(reversed(items))
                 self._queued_bytes += size
                 kept = True
@@ -300,7 +304,7 @@ class Recorder:
 
     def _add(self, counter: str, value: int) -> None:
         with self._count_lock:
-            setattr(self, counter, getattr(self, counter) + value)
+            self._counts[counter] += value
 
     def _store(self, entries: list) -> None:
         """Store entries; documents refused on their own merits go to the quarantine file. Any
@@ -347,7 +351,8 @@ class Recorder:
     def _raw_record(self, key: _Key, raw: bytes, secs: int, nsecs: int) -> MessageRecord:
         return MessageRecord(new_message_id(secs, nsecs, self.robot_id), key[0], key[1], key[2], raw,
                              secs, nsecs, tags=self.tags + self.topic_tags.get(key[0], []),
-                             session_id=self.session_id, robot_id=self.robot_id, callerid=key[3])
+                             session_id=self.session_id, robot_id=self.robot_id, callerid=key[3],
+                             author=self.author)
 
     def _record(self, key: _Key, raw: bytes, secs: int, nsecs: int) -> MessageRecord:
         cls = self._message_class(key)
@@ -356,7 +361,7 @@ class Recorder:
         return make_record(key[0], cls, raw, receive=genpy.Time(secs, nsecs),
                            tags=self.tags + self.topic_tags.get(key[0], []),
                            session_id=self.session_id, robot_id=self.robot_id,
-                           max_array_len=self.store.max_array_len, callerid=key[3])
+                           max_array_len=self.store.max_array_len, callerid=key[3], author=self.author)
 
     def _message_class(self, key: _Key) -> Optional[type]:
         if key not in self._classes:

@@ -76,6 +76,7 @@ class MessageRecord:
     session_id: Optional[str] = None
     robot_id: Optional[str] = None
     callerid: str = ""   # the publisher (with robot_id: which TopicInfo the message belongs to)
+    author: Optional[str] = None   # who recorded it (the original mongodb_api's `author`)
 
     @property
     def receive_time(self) -> float:
@@ -106,7 +107,7 @@ def make_record(topic: str, msg_class: type, raw: bytes, *, receive: Optional[ge
                 tags: Sequence[str] = (), session_id: Optional[str] = None,
                 robot_id: Optional[str] = None, record_id: Optional[str] = None,
                 message=None, max_array_len: int = msgtypes.MAX_ARRAY_LEN,
-                callerid: str = "") -> MessageRecord:
+                callerid: str = "", author: Optional[str] = None) -> MessageRecord:
     """A record for the serialized message `raw` of `msg_class` received at `receive`.
 
     The fields are decoded from `raw` (or taken from `message` when given); bytes that do not
@@ -122,7 +123,8 @@ def make_record(topic: str, msg_class: type, raw: bytes, *, receive: Optional[ge
         id=record_id or new_message_id(receive.secs, receive.nsecs, robot_id), topic=topic,
         msg_type=msg_class._type, md5sum=msg_class._md5sum, raw=bytes(raw),
         receive_secs=receive.secs, receive_nsecs=receive.nsecs,
-        tags=[str(t) for t in tags], session_id=session_id, robot_id=robot_id, callerid=callerid or "")
+        tags=[str(t) for t in tags], session_id=session_id, robot_id=robot_id, callerid=callerid or "",
+        author=author or None)
     if message is not None:
         record.header_stamp = msgtypes.header_stamp(message)
         record.fields = msgtypes.to_fields(message, max_array_len)
@@ -134,19 +136,22 @@ class StoredMessage:
 
     Attributes: id, topic, msg_type, md5sum, receive_time (float s), receive_stamp (genpy.Time,
     exact), header_stamp (float s or None), tags, session_id, robot_id, fields (decoded, as
-    stored), size (bytes), callerid (the publisher, "" if unknown); `raw` (exact serialized
+    stored), size (bytes), callerid (the publisher, "" if unknown), author (or None); `raw` (exact serialized
     bytes, fetched on first use when kept apart) and `message()` (the genpy message).
     """
 
     __slots__ = ("id", "topic", "msg_type", "md5sum", "receive_stamp", "header_stamp", "tags",
-                 "session_id", "robot_id", "fields", "size", "_raw", "_load_raw", "_resolve", "callerid")
+                 "session_id", "robot_id", "fields", "size", "_raw", "_load_raw", "_resolve", "callerid",
+                 "author")
 
     def __init__(self, *, id: str, topic: str, msg_type: str, md5sum: str,
                  receive_stamp: genpy.Time, header_stamp: Optional[float], tags: Sequence[str],
                  session_id: Optional[str], robot_id: Optional[str], fields: Optional[Dict[str, Any]],
                  size: int, raw: Optional[bytes], load_raw: Callable[[str], bytes],
-                 resolve: Callable[[str, str], type], callerid: str = ""):
+                 resolve: Callable[[str, str], type], callerid: str = "",
+                 author: Optional[str] = None):
         self.id = id
+        self.author = author
         self.callerid = callerid
         self.topic = topic
         self.msg_type = msg_type

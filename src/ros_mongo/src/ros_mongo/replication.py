@@ -229,6 +229,14 @@ class PushReplication:
             self.replicator.session.auth = local.auth
         self._apache: Optional[bool] = None
 
+    @classmethod
+    def for_robot(cls, local: CouchDatabase, central: CouchDatabase, robot_id: str,
+                  spec: Optional[ReplicationSpec] = None) -> "PushReplication":
+        """The push of `robot_id`'s database `local` to `central` (all documents unless `spec`
+        says otherwise), under that robot's `_replicator` document id."""
+        return cls(local, central, spec or ReplicationSpec(),
+                   doc_id=replication_doc_id(robot_id, local.name))
+
     def _is_apache(self) -> bool:
         if self._apache is None:
             self._apache = self.local.is_apache_couchdb()

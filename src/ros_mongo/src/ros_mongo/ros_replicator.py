@@ -20,7 +20,6 @@ from ros_mongo.replication import (
     ReplicationError,
     ReplicationSpec,
     ReplicationStatus,
-    replication_doc_id,
 )
 from ros_mongo.retention import Retention
 from ros_mongo.urls import CredentialsError, redact_url, with_credentials
@@ -89,9 +88,9 @@ class ReplicatorNode:
         self.local = CouchDatabase(config.local_url, timeout=config.timeout)
         self.central = CouchDatabase(central_url, timeout=config.timeout)
         self.spec = ReplicationSpec(tuple(config.topics), tuple(config.local_topics))
-        doc_id = replication_doc_id(self.robot_id, self.local.name)
-        self.replication = PushReplication(self.local, self.central, self.spec, doc_id=doc_id)
-        self.tracker = PendingTracker(self.local, self.central, self.spec, checkpoint_id=doc_id,
+        self.replication = PushReplication.for_robot(self.local, self.central, self.robot_id, self.spec)
+        self.tracker = PendingTracker(self.local, self.central, self.spec,
+                                      checkpoint_id=self.replication.doc_id,
                                       max_tracked=config.max_tracked)
         self.retention: Optional[Retention] = None
         if config.retention_age > 0:

@@ -2,6 +2,7 @@
 
 Its parameters are `RetrieverConfig` (config/ros_mongo_retriever.yaml is generated from it).
 """
+import json
 import sys
 import threading
 import time
@@ -16,12 +17,13 @@ from std_srvs.srv import Trigger, TriggerResponse
 
 from robot_common.errors import ConfigError
 from robot_common.params import NodeConfig, param
-from robot_common.ros_node import read_config, run_node
+from robot_common.ros_node import run_node
 from ros_mongo.errors import QueryError, StoreError
+from ros_mongo.legacy import legacy_config, original_document
 from ros_mongo.query import Query, parse_query, query_from_mapping
 from ros_mongo.records import TopicInfo
 from ros_mongo.replay import Replayer, ReplayItem
-from ros_mongo.srv import Count, CountResponse, Start, StartResponse
+from ros_mongo.srv import Count, CountResponse, SensorData, SensorDataResponse, Start, StartResponse
 from ros_mongo.store import open_store
 from ros_mongo.urls import PASSWORD_ENV, password_in_url, redact_url
 
@@ -38,7 +40,9 @@ class RetrieverConfig(NodeConfig):
     db_credentials_file: str = param("", "file holding 'user:password' or 'password' for db_url "
                                          "(empty: $ROS_MONGO_DB_PASSWORD, if set)")
     query: str = param("", "YAML/JSON query mapping or the original '<key> <value>' form ('tags "
-                           "lidar'); its keys override the query parameters below")
+                           "lidar', 'author ServiceRobot'); its keys override the query parameters below")
+    require_query: bool = param(False, "refuse to start without ~query, as the original's "
+                                       "retrieve.launch did (which sets it)")
     topics: List[str] = param([], "query: only these topics (empty: all)")
     type: str = param("", "query: only this message type (empty: any)")
     tags: List[str] = param([], "query: only messages with all these tags")
@@ -56,8 +60,9 @@ class RetrieverConfig(NodeConfig):
     publish_clock: bool = param(False, "publish /clock with the recorded time")
     clock_rate: float = param(100.0, "/clock messages per second")
     autostart: bool = param(True, "start playing at launch")
-    start_delay: float = param(1.0, "longest wait (s) before playing for the subscribers the master "
-                                    "knows of to connect to the output topics")
+    start_delay: float = param(1.0, "autostart: seconds given to subscribers launched alongside to "
+                                    "register, then at most as long again for the subscribers the "
+                                    "master knows of to connect")
     prefetch: int = param(100000, "messages read ahead, at most (filled before playing)")
     prefetch_mb: float = param(1024.0, "MB read ahead, at most")
     preroll_timeout: float = param(15.0, "longest wait (s) for the read-ahead before playing")
@@ -69,6 +74,10 @@ class RetrieverConfig(NodeConfig):
     db_timeout: float = param(10.0, "seconds a database request may take")
 
     def check(self) -> None:
+        if self.require_query and not self.query.strip():
+            raise ConfigError("no query given: retrieve.launch needs one, e.g. query:='tags lidar' or "
+                              "query:='author ServiceRobot' (to replay everything use "
+                              "ros_mongo_retrieve.launch)")
         configured_query(self)
 
 
@@ -81,7 +90,10 @@ class RetrieverNode:
     ~sync_max_bytes go through a queue of ~queue_size per subscriber.
     Publishes: <topic><output_suffix> for each stored topic the query can return (its stored type,
         md5sum, definition and latching; exact stored bytes); /clock (rosgraph_msgs/Clock) if asked.
-    Services: ~count (ros_mongo/Count), ~start (ros_mongo/Start), ~stop (std_srvs/Trigger).
+    Services: ~count (ros_mongo/Count), ~start (ros_mongo/Start), ~stop (std_srvs/Trigger),
+        ~sensor_data (ros_mongo/SensorData: matching messages in the original mongodb_api's form).
+    The original mongodb_api's global parameters are honoured with a deprecation warning
+    (ros_mongo.legacy).
     """
 
     def __init__(self, config: RetrieverConfig):
@@ -107,6 +119,7 @@ class RetrieverNode:
         rospy.Service("~count", Count, self._count)
         rospy.Service("~start", Start, self._start)
         rospy.Service("~stop", Trigger, self._stop)
+        rospy.Service("~sensor_data", SensorData, self._sensor_data)
         if self.config.autostart:
             threading.Timer(self.config.start_delay, self._autostart).start()
         return self
@@ -193,6 +206,21 @@ class RetrieverNode:
         ok, message = self.start(query)
         return StartResponse(success=ok, message=message)
 
+    def _sensor_data(self, request) -> SensorDataResponse:
+        if not request.query.strip():
+            return SensorDataResponse(success=False, message="no query given, e.g. 'tags lidar'")
+        limit = request.limit if request.limit > 0 else 100
+        try:
+            query = parse_query(request.query)
+            count = self.store.count(query)
+            documents = [json.dumps(original_document(stored), default=str)
+                         for stored in self.store.find(query, limit=limit)]
+        except StoreError as err:
+            return SensorDataResponse(success=False, message=str(err), count=0)
+        return SensorDataResponse(success=True, count=count, documents=documents,
+                                  message=f"{count} messages match {query.describe()}; "
+                                          f"{len(documents)} returned")
+
     def _stop(self, _request) -> TriggerResponse:
         stopped = self.replayer.stop()
         return TriggerResponse(success=True, message=f"stopped after {self.replayer.published} messages"
@@ -215,7 +243,7 @@ def configured_query(config: RetrieverConfig) -> Query:
     mapping = {"topics": config.topics, "type": config.type, "tags": config.tags,
                "session_id": config.session_id, "robot_id": config.robot_id,
                "start_time": config.start_time or None, "end_time": config.end_time or None,
-               "fields": config.fields or None}
+               "fields": config.fields or None, "author": None}
     try:
         if config.query.strip():
             text_query = parse_query(config.query)
@@ -228,11 +256,13 @@ def configured_query(config: RetrieverConfig) -> Query:
 def _as_mapping(query: Query) -> Dict:
     return {"topics": query.topics, "type": query.msg_type, "tags": query.tags,
             "session_id": query.session_id, "robot_id": query.robot_id, "start_time": query.start_time,
-            "end_time": query.end_time, "fields": query.fields}
+            "end_time": query.end_time, "fields": query.fields, "author": query.author}
 
 
 def _start() -> RetrieverNode:
-    node = RetrieverNode(read_config(RetrieverConfig)).setup()
+    config = legacy_config(RetrieverConfig, "retriever", rospy.get_param("~", {}), rospy.get_param,
+                           rospy.logwarn)
+    node = RetrieverNode(config).setup()
     rospy.on_shutdown(node.shutdown)
     return node
 

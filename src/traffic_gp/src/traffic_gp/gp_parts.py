@@ -144,46 +144,53 @@ def _poisson_exposure_class(lib):
     return PoissonExposure
 
 
-def _space(lengthscale: float):
+def _space(lengthscale: float, spatial_dims: int = 2):
+    """Squared exponential over the first `spatial_dims` input columns: one lengthscale per
+    column for map coordinates (x, y), one shared lengthscale for more columns (a geodesic
+    embedding's coordinates are all metres of walking distance)."""
     gpflow = libs().gpflow
-    return gpflow.kernels.SquaredExponential(lengthscales=[lengthscale, lengthscale],
-                                             active_dims=[0, 1])
+    lengthscales = [lengthscale, lengthscale] if spatial_dims == 2 else lengthscale
+    return gpflow.kernels.SquaredExponential(lengthscales=lengthscales,
+                                             active_dims=list(range(spatial_dims)))
 
 
-def _cycle(period: float, lengthscale: float, variance: float = 1.0):
+def _cycle(period: float, lengthscale: float, variance: float = 1.0, column: int = 2):
     gpflow = libs().gpflow
     base = gpflow.kernels.SquaredExponential(variance=variance, lengthscales=lengthscale,
-                                             active_dims=[2])
+                                             active_dims=[column])
     kernel = gpflow.kernels.Periodic(base, period=period)
     gpflow.set_trainable(kernel.period, False)
     gpflow.set_trainable(base.variance, False)
     return kernel
 
 
-def build_kernel(*, spatial_lengthscale: float, hourly: bool, weekly: bool):
+def build_kernel(*, spatial_lengthscale: float, hourly: bool, weekly: bool,
+                 spatial_dims: int = 2):
     """space x daily cycle [+ space x hourly cycle x daily (weekly) envelope]
-    [+ space x weekly cycle].
+    [+ space x weekly cycle]; inputs: `spatial_dims` space columns, then the time.
 
     Periodic lengthscales are in units of the sine of the phase: 0.5 of a 24 h period is about
     4 h, 0.3 of a 1 h period about 6 minutes (the rush before the hour).
     """
     gpflow = libs().gpflow
-    parts = [_space(spatial_lengthscale) * _cycle(24.0, 0.6)]
+    k = spatial_dims
+    parts = [_space(spatial_lengthscale, k) * _cycle(24.0, 0.6, column=k)]
     if hourly:   # rushes: an hourly cycle whose strength varies over the day (or week)
-        envelope = _cycle(168.0, 0.1) if weekly else _cycle(24.0, 0.6)
-        parts.append(_space(spatial_lengthscale) * _cycle(1.0, 0.3) * envelope)
+        envelope = _cycle(168.0, 0.1, column=k) if weekly else _cycle(24.0, 0.6, column=k)
+        parts.append(_space(spatial_lengthscale, k) * _cycle(1.0, 0.3, column=k) * envelope)
     if weekly:
-        parts.append(_space(spatial_lengthscale * 2) * _cycle(168.0, 0.5))
+        parts.append(_space(spatial_lengthscale * 2, k) * _cycle(168.0, 0.5, column=k))
     return parts[0] if len(parts) == 1 else gpflow.kernels.Sum(parts)
 
 
 def build_model(inducing: np.ndarray, *, spatial_lengthscale: float, hourly: bool, weekly: bool,
                 log_mean: float, num_data: int, train_inducing: bool, likelihood: str = "poisson"):
     """The whitened SVGP with the `likelihood` ("poisson" or "negbin", both with exposure) and a
-    constant mean `log_mean`."""
+    constant mean `log_mean`; the inputs' last column is the time, the others are space."""
     lib = libs()
     tf, gpflow = lib.tf, lib.gpflow
-    kernel = build_kernel(spatial_lengthscale=spatial_lengthscale, hourly=hourly, weekly=weekly)
+    kernel = build_kernel(spatial_lengthscale=spatial_lengthscale, hourly=hourly, weekly=weekly,
+                          spatial_dims=inducing.shape[1] - 1)
     model = gpflow.models.SVGP(kernel, make_likelihood(likelihood),
                                gpflow.inducing_variables.InducingPoints(inducing.astype(FLOAT)),
                                mean_function=gpflow.mean_functions.Constant(np.array([log_mean])),
@@ -208,7 +215,8 @@ class Trainer:
         self.gamma = tf.Variable(gamma, dtype=FLOAT, trainable=False)
         self.natgrad = gpflow.optimizers.NaturalGradient(gamma=self.gamma)
         self.adam = lib.Adam(learning_rate=learning_rate)
-        spec = [tf.TensorSpec([None, 3], FLOAT), tf.TensorSpec([None, 2], FLOAT)]
+        columns = int(model.inducing_variable.Z.shape[1])
+        spec = [tf.TensorSpec([None, columns], FLOAT), tf.TensorSpec([None, 2], FLOAT)]
         single_pass = hasattr(self.natgrad, "_natgrad_apply_gradients")  # GPflow 2.9 - 2.11
         self.step = tf.function(self._step if single_pass else self._two_pass_step,
                                 input_signature=spec)

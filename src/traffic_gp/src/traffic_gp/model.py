@@ -14,6 +14,13 @@ negative log predictive density of the held-out rows (`validation_loss_`); it st
 validation loss has not improved for `patience` evaluations after the warm-up and returns the
 parameters of the best evaluation (`best_step_`; of evaluations within 0.1 % of the best loss,
 the latest, the most converged one): `n_steps` is a maximum, not a fixed cost.
+Spatial inputs (`spatial_inputs`): "xy" puts the kernel on map coordinates, so a busy hall's
+rate leaks through a wall into the room behind it; "geodesic" puts it on a
+`geodesic.GeodesicEmbedding` of the map's free cells (distances through free space), made by
+`fit` from the `cells` it is given and saved with the model; "auto" (the default) is geodesic
+when `fit` is given the cells, xy otherwise. With geodesic inputs, parts of the free space
+that no training row's place connects to (walled off from everything watched) are predicted
+empty (`posterior.UNREACHABLE_DENSITY`).
 `partial_fit` continues from the current state (warm start) with the new rows added to the data
 (all rows, no hold-out, no early stopping). TensorFlow is imported on first use (by `gp_parts`).
 
@@ -29,10 +36,11 @@ import numpy as np
 from tqdm import tqdm
 
 import traffic_gp.gp_parts as gp_parts
-from robot_common.cells import HOURS_PER_WEEK
+from robot_common.cells import HOURS_PER_WEEK, CellGrid
 from traffic_gp.errors import ConfigError, ModelFormatError, NotFittedError
+from traffic_gp.geodesic import DEFAULT_DIMS, GeodesicEmbedding
 from traffic_gp.observations import Observations
-from traffic_gp.persistence import read_parameters, write_model_file
+from traffic_gp.persistence import read_parameters, read_spatial, write_model_file
 from traffic_gp.posterior import LatentPredictions
 
 log = logging.getLogger(__name__)
@@ -40,7 +48,8 @@ log = logging.getLogger(__name__)
 PARAMS = ("n_inducing", "spatial_lengthscale", "hourly", "weekly", "batch_size", "n_steps",
           "online_steps", "learning_rate", "natgrad_gamma", "train_inducing", "max_rows",
           "time_bin_minutes", "random_state", "likelihood", "validation_fraction", "eval_every",
-          "patience")
+          "patience", "spatial_inputs", "geodesic_dims")
+SPATIAL_INPUTS = ("auto", "xy", "geodesic")
 WARMUP_STEPS = 100
 ADAM_WARMUP_STEPS = 50      # a new optimiser's (after fit or load) step size ramps up over these
 EVAL_ROWS = 20000           # rows of the fixed ELBO sample and at most of the validation set
@@ -68,6 +77,8 @@ class TrafficGP(LatentPredictions):
         validation_fraction: share of the rows `fit` holds out for early stopping (0: none).
         eval_every: steps between evaluations (ELBO on a fixed sample, validation loss).
         patience: evaluations without a better validation loss before `fit` stops.
+        spatial_inputs: "auto", "xy" or "geodesic" (see the module docstring).
+        geodesic_dims: coordinates of the geodesic embedding.
         progress: show a tqdm bar while training.
     """
 
@@ -78,6 +89,7 @@ class TrafficGP(LatentPredictions):
                  max_rows: int = 2_000_000, time_bin_minutes: float = 2.0,
                  random_state: Optional[int] = 0, likelihood: str = "negbin",
                  validation_fraction: float = 0.1, eval_every: int = 50, patience: int = 6,
+                 spatial_inputs: str = "auto", geodesic_dims: int = DEFAULT_DIMS,
                  progress: bool = False):
         self.n_inducing, self.spatial_lengthscale = n_inducing, spatial_lengthscale
         self.hourly, self.weekly = hourly, weekly
@@ -87,6 +99,7 @@ class TrafficGP(LatentPredictions):
         self.time_bin_minutes, self.random_state = time_bin_minutes, random_state
         self.likelihood, self.validation_fraction = likelihood, validation_fraction
         self.eval_every, self.patience = eval_every, patience
+        self.spatial_inputs, self.geodesic_dims = spatial_inputs, geodesic_dims
         self.progress = progress
 
     def get_params(self) -> dict:
@@ -107,18 +120,29 @@ class TrafficGP(LatentPredictions):
                   "time_bin_minutes": self.time_bin_minutes > 0,
                   "likelihood": self.likelihood in gp_parts.LIKELIHOODS,
                   "validation_fraction": 0 <= self.validation_fraction < 1,
-                  "eval_every": self.eval_every >= 1, "patience": self.patience >= 1}
+                  "eval_every": self.eval_every >= 1, "patience": self.patience >= 1,
+                  "spatial_inputs": self.spatial_inputs in SPATIAL_INPUTS,
+                  "geodesic_dims": self.geodesic_dims >= 1}
         bad = [f"{name}={getattr(self, name)!r}" for name, ok in checks.items() if not ok]
         if bad:
             raise ConfigError(f"bad TrafficGP parameters: {', '.join(bad)}")
 
     # ---- training -------------------------------------------------------------------------
-    def fit(self, obs: Observations, n_steps: Optional[int] = None) -> "TrafficGP":
+    def fit(self, obs: Observations, n_steps: Optional[int] = None, *,
+            cells: Optional[CellGrid] = None) -> "TrafficGP":
         """Start afresh on `obs` and train at most `n_steps` (default `self.n_steps`) steps,
-        stopping early on the held-out rows (see the module docstring)."""
+        stopping early on the held-out rows (see the module docstring); `cells` (the map's
+        cell grid) gives the geodesic spatial inputs."""
         self._check_params()
         if len(obs) == 0:
             raise NotFittedError("cannot fit on zero observations")
+        if self.spatial_inputs == "geodesic" and cells is None:
+            raise ConfigError("spatial_inputs='geodesic' needs the map: fit(obs, cells=CellGrid)")
+        self.embedding_ = None
+        if cells is not None and self.spatial_inputs != "xy":
+            self.embedding_ = GeodesicEmbedding.from_cells(cells, dims=self.geodesic_dims,
+                                                           seed=self.random_state or 0)
+            self.embedding_.mark_observed(obs.x, obs.y)
         self._rng = np.random.default_rng(self.random_state)
         self.data_ = obs
         order = self._rng.permutation(len(obs))
@@ -128,7 +152,7 @@ class TrafficGP(LatentPredictions):
         self._validation_rows = np.sort(order[:min(n_val, EVAL_ROWS)])
         self._train_rows = np.sort(order[n_val:])
         fit_part = obs.subset(self._train_rows)
-        inputs = fit_part.inputs(self.period)
+        inputs = self._obs_inputs(fit_part)
         rate = max(fit_part.count.sum(), 0.5) / fit_part.exposure.sum()
         self.model_ = gp_parts.build_model(
             self._initial_inducing(inputs), spatial_lengthscale=self.spatial_lengthscale,
@@ -149,12 +173,17 @@ class TrafficGP(LatentPredictions):
         if not hasattr(self, "model_"):
             return self.fit(obs, n_steps)
         if len(obs):
+            if self.embedding_ is not None:
+                self.embedding_.mark_observed(obs.x, obs.y)
             data = Observations.concat([self.data_, obs])
             if len(data) > self.max_rows:
                 data = data.compress(self.time_bin_minutes / 60.0, self.period)
             self.data_ = data
         self.model_.num_data.assign(float(len(self.data_)))
         return self._train(self.online_steps if n_steps is None else n_steps)
+
+    def _obs_inputs(self, obs: Observations) -> np.ndarray:
+        return self.model_inputs(obs.x, obs.y, obs.t)
 
     def _initial_inducing(self, inputs: np.ndarray) -> np.ndarray:
         unique = np.unique(inputs, axis=0)
@@ -171,13 +200,13 @@ class TrafficGP(LatentPredictions):
             self._trainer_used, self._trainer_steps = False, 0
         rows = getattr(self, "_train_rows", None)
         data = self.data_ if rows is None else self.data_.subset(rows)
-        inputs = data.inputs(self.period)
+        inputs = self._obs_inputs(data)
         targets = np.column_stack([data.count, data.exposure])
         eval_rows = np.random.default_rng(self.random_state).permutation(len(data))[:EVAL_ROWS]
         eval_inputs, eval_targets = inputs[eval_rows], targets[eval_rows]
         if early_stopping:
             held_out = self.data_.subset(self._validation_rows)
-            val_inputs = held_out.inputs(self.period)
+            val_inputs = self._obs_inputs(held_out)
             val_targets = np.column_stack([held_out.count, held_out.exposure])
         size = min(self.batch_size, len(data))
         steps = range(n_steps)
@@ -273,8 +302,9 @@ class TrafficGP(LatentPredictions):
                   "train_seconds": self.train_seconds_,
                   "best_step": getattr(self, "best_step_", None),
                   "libraries": gp_parts.library_versions(), "meta": meta or {}}
+        spatial = None if self.embedding_ is None else self.embedding_.to_arrays()
         return write_model_file(path, header, gp_parts.parameter_values(self.model_),
-                                self.data_ if include_data else None)
+                                self.data_ if include_data else None, spatial)
 
     @classmethod
     def load(cls, path) -> "TrafficGP":
@@ -286,6 +316,7 @@ class TrafficGP(LatentPredictions):
             inducing = values[".inducing_variable.Z"]
         except (TypeError, KeyError) as err:
             raise ModelFormatError(f"{path}: the saved model lacks {err}") from err
+        estimator.embedding_ = GeodesicEmbedding.from_arrays(read_spatial(path))
         estimator._restore(header, values, inducing, data)
         return estimator
 

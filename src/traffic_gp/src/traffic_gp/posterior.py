@@ -6,27 +6,45 @@ saved (`persistence.read_parameters`), maps them to their constrained values as 
 (softplus for the positive ones, TensorFlow Probability's fill_triangular for q_sqrt) and
 predicts the latent log density as the whitened SVGP's `predict_f` does; a negative-binomial
 model's dispersion (`.likelihood.dispersion`, softplus) comes along, so count intervals and
-log-likelihoods are those of the saved likelihood. `LatentPredictions` holds the predictions both
-`TrafficGP` and the snapshot derive from the latent Gaussian.
+log-likelihoods are those of the saved likelihood. A model with map-aware spatial inputs keeps
+its `geodesic.GeodesicEmbedding` in the file (`persistence.read_spatial`): the snapshot maps
+places to the same inputs. `LatentPredictions` holds the predictions both `TrafficGP` and the
+snapshot derive from the latent Gaussian.
 """
 import re
-from typing import Dict, List, Tuple
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
 import traffic_gp.predictive as predictive
 from robot_common.cells import HOURS_PER_WEEK
 from traffic_gp.errors import ConfigError, ModelFormatError, NotFittedError
-from traffic_gp.persistence import read_parameters
+from traffic_gp.geodesic import GeodesicEmbedding
+from traffic_gp.persistence import read_parameters, read_spatial
 
 JITTER = 1e-6          # GPflow's default jitter on K(Z, Z)
+UNREACHABLE_DENSITY = 1e-6   # people per m^2 where no watched place connects (geodesic inputs)
 CHUNK = 20000          # prediction rows per block (memory stays small)
 
 
 class LatentPredictions:
     """Predictions from the Gaussian over the log density f(x, y, t); subclasses provide
-    `_latent(inputs, full_cov)`, `_fitted()`, `period`, `random_state` and `dispersion_`
-    (None for Poisson counts, r of the negative binomial otherwise)."""
+    `_latent(inputs, full_cov)`, `_fitted()`, `period`, `random_state`, `dispersion_`
+    (None for Poisson counts, r of the negative binomial otherwise) and `embedding_` (None:
+    the kernel works on x, y; else the `GeodesicEmbedding` giving the spatial inputs; places
+    it finds unreachable from every watched place get the log of UNREACHABLE_DENSITY, with no
+    uncertainty: nobody can walk there)."""
+
+    embedding_: Optional[GeodesicEmbedding] = None
+
+    def model_inputs(self, x, y, t) -> np.ndarray:
+        """The GP's input rows for places (x, y) and times t: the spatial columns (x, y, or the
+        geodesic embedding of the place's cell), then the time modulo the period."""
+        x, y, t = (np.ravel(v) for v in np.broadcast_arrays(*(np.asarray(v, dtype=float)
+                                                              for v in (x, y, t))))
+        space = np.column_stack([x, y]) if self.embedding_ is None \
+            else self.embedding_.transform(x, y)
+        return np.column_stack([space, np.mod(t, self.period)])
 
     def _inputs(self, x, y, t) -> np.ndarray:
         if not self._fitted():
@@ -34,11 +52,28 @@ class LatentPredictions:
         x, y, t = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (x, y, t)))
         if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y)) and np.all(np.isfinite(t))):
             raise ConfigError("prediction inputs must be finite numbers")
-        return np.column_stack([x.ravel(), y.ravel(), np.mod(t.ravel(), self.period)])
+        return self.model_inputs(x, y, t)
+
+    def _latent_at(self, x, y, t, full_cov: bool = False):
+        """`_latent` at places and times, with the unreachable places set (see the class)."""
+        mean, cov = self._latent(self._inputs(x, y, t), full_cov=full_cov)
+        if self.embedding_ is None:
+            return mean, cov
+        x, y, _ = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (x, y, t)))
+        away = self.embedding_.unreachable(x, y)
+        if away.any():
+            mean, cov = mean.copy(), cov.copy()
+            mean[away] = np.log(UNREACHABLE_DENSITY)
+            if full_cov:
+                cov[away, :], cov[:, away] = 0.0, 0.0
+                cov[away, away] = 1e-12
+            else:
+                cov[away] = 1e-12
+        return mean, cov
 
     def predict_latent(self, x, y, t) -> Tuple[np.ndarray, np.ndarray]:
         """Mean and variance of the log density at places (x, y) and times t (hours of week)."""
-        return self._latent(self._inputs(x, y, t), full_cov=False)
+        return self._latent_at(x, y, t)
 
     def predict(self, x, y, t, exposure=1.0) -> np.ndarray:
         """Expected people counts (density for exposure 1 m^2)."""
@@ -57,7 +92,7 @@ class LatentPredictions:
 
     def sample_totals(self, x, y, t, exposure, n_samples: int = 500) -> np.ndarray:
         """Samples of the summed expected count over many cells at one time (joint posterior)."""
-        mean, cov = self._latent(self._inputs(x, y, t), full_cov=True)
+        mean, cov = self._latent_at(x, y, t, full_cov=True)
         chol = np.linalg.cholesky(cov + 1e-8 * np.eye(cov.shape[0]))
         rng = np.random.default_rng(self.random_state)
         f = mean[None, :] + rng.standard_normal((n_samples, mean.size)) @ chol.T
@@ -87,16 +122,18 @@ def fill_triangular(vector: np.ndarray) -> np.ndarray:
 
 
 class _Factor:
-    """One factor of a product kernel: squared exponential over x, y or periodic over t."""
+    """One factor of a product kernel: squared exponential over the space columns (all but the
+    last; one lengthscale per column, or one shared) or periodic over the time (the last)."""
 
     def __init__(self, variance: float, lengthscales: np.ndarray, period: float = 0.0):
         self.variance, self.lengthscales, self.period = variance, np.atleast_1d(lengthscales), period
 
     def matrix(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         if self.period:        # GPflow Periodic(SquaredExponential) on the time column
-            r = np.pi * (a[:, 2, None] - b[None, :, 2]) / self.period
+            r = np.pi * (a[:, -1, None] - b[None, :, -1]) / self.period
             return self.variance * np.exp(-0.5 * (np.sin(r) / self.lengthscales[0]) ** 2)
-        sq = sum(((a[:, d, None] - b[None, :, d]) / self.lengthscales[d]) ** 2 for d in (0, 1))
+        scales = np.broadcast_to(self.lengthscales, (a.shape[1] - 1,))
+        sq = sum(((a[:, d, None] - b[None, :, d]) / scales[d]) ** 2 for d in range(len(scales)))
         return self.variance * np.exp(-0.5 * sq)
 
 
@@ -107,8 +144,10 @@ class PosteriorSnapshot(LatentPredictions):
     train further, load the file as a TrafficGP (which imports TensorFlow).
     """
 
-    def __init__(self, header: dict, values: Dict[str, np.ndarray], path: str = ""):
+    def __init__(self, header: dict, values: Dict[str, np.ndarray], path: str = "",
+                 spatial: Optional[Dict[str, np.ndarray]] = None):
         params = header["params"]
+        self.embedding_ = GeodesicEmbedding.from_arrays(spatial)
         self.path, self.header = path, header
         self.weekly = bool(params.get("weekly", False))
         self.random_state = params.get("random_state", 0)
@@ -117,6 +156,10 @@ class PosteriorSnapshot(LatentPredictions):
             self.terms = _kernel_terms(values)
             self.constant = float(values[".mean_function.c"].ravel()[0])
             self.inducing = np.asarray(values[".inducing_variable.Z"], float)
+            columns = 3 if self.embedding_ is None else self.embedding_.dims + 1
+            if self.inducing.ndim != 2 or self.inducing.shape[1] != columns:
+                raise ValueError(f"inducing points of shape {self.inducing.shape} for "
+                                 f"{columns} input columns")
             q_mu = np.asarray(values[".q_mu"], float)[:, 0]
             q_sqrt = fill_triangular(np.asarray(values[".q_sqrt"], float))[0]
             self.dispersion_ = None
@@ -135,7 +178,7 @@ class PosteriorSnapshot(LatentPredictions):
     def load(cls, path) -> "PosteriorSnapshot":
         """The posterior of a model file written by `TrafficGP.save` (no TensorFlow)."""
         header, values, _ = read_parameters(path)
-        return cls(header, values, str(path))
+        return cls(header, values, str(path), read_spatial(path))
 
     @property
     def period(self) -> float:

@@ -3,13 +3,14 @@
 `TrafficServer` is built from a `ServerConfig` (construction is pure); `setup()` wires ROS. The
 node executable `nodes/traffic_server` only reads the parameters and calls `start`.
 """
+import json
 import math
 import os
 import queue
 import shutil
 import threading
 import time
-from typing import List, Optional
+from typing import Any, Dict, List, NamedTuple, Optional
 
 import numpy as np
 import rospy
@@ -21,6 +22,9 @@ from robot_common.maps import load_map
 from robot_common.msg import PeopleCount
 from robot_common.ros_maps import grid_to_msg, msg_to_grid
 from robot_common.ros_node import read_config
+from ros_mongo.changes import ChangesFollower
+from ros_mongo.errors import StoreError
+from ros_mongo.urls import redact_url
 from traffic_gp.errors import TrafficError
 from traffic_gp.model import TrafficGP
 from traffic_gp.observations import Observations, aggregate_view
@@ -28,6 +32,22 @@ from traffic_gp.posterior import PosteriorSnapshot
 from traffic_gp.queries import CrowdQueries
 from traffic_gp.server_config import ServerConfig
 from traffic_gp.srv import PredictCount, PredictCountResponse, PredictRegion, PredictRegionResponse
+
+PEOPLE_COUNT_TYPE = "robot_common/PeopleCount"
+LEARNED_SUFFIX = ".learned.json"  # next to the model file: robots learned from, feed position
+
+
+class FeedCount(NamedTuple):
+    """A PeopleCount read from the central database: who recorded it, and the feed position."""
+
+    msg: PeopleCount
+    robot: str
+    seq: Any
+
+
+def learned_path(model_path: str) -> str:
+    """Where the learned-from record of a model file is kept."""
+    return model_path + LEARNED_SUFFIX
 
 
 class TrafficServer:
@@ -43,12 +63,20 @@ class TrafficServer:
       ~lookahead_step_minutes (5), ~saturation_density (1 person/m^2 = 95), ~wall_value (-1 or
       100), ~full_resolution (true: cost maps at the map's resolution), ~frame_id ("map"),
       ~model ({}: dict of TrafficGP keyword arguments).
+      ~source ("topic": the `people_counts` topic; "central": the `_changes` feed of the central
+      fleet database ~central_url, PeopleCount message documents of every robot, optionally of
+      ~central_topics only), ~central_credentials_file.
     Subscribes: `map` (nav_msgs/OccupancyGrid, only when map_yaml is empty), `people_counts`
-      (robot_common/PeopleCount).
+      (robot_common/PeopleCount; source topic only).
+    Source central: follows the feed from its last sequence. The sequence of the last message
+      folded into the model, and the rows and messages learned per robot, are saved with the
+      model (`<model_path>.learned.json`) and read back with it, so a restarted node resumes
+      where the saved model stopped (nothing counted twice).
     Publishes (latched): `~crowd_costmap` (maximum over now .. now + look-ahead) and
       `~crowd_costmap_now` (nav_msgs/OccupancyGrid, 0..95, walls wall_value).
     Services: `~predict_count` (traffic_gp/PredictCount), `~predict_region`
-      (traffic_gp/PredictRegion), `~save_model` (std_srvs/Trigger).
+      (traffic_gp/PredictRegion), `~save_model` (std_srvs/Trigger), `~status` (std_srvs/Trigger:
+      which robots and how many rows and messages of each the model learned from).
     """
 
     def __init__(self, config: ServerConfig):
@@ -61,6 +89,11 @@ class TrafficServer:
         self._pending: List[Observations] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
+        self.learned: Dict[str, List[int]] = {}          # robot -> [rows, messages] in the model
+        self._pending_learned: Dict[str, List[int]] = {}  # the same for rows not folded in yet
+        self.feed_seq: Any = None                         # central feed position of the model
+        self._pending_seq: Any = None
+        self.follower: Optional[ChangesFollower] = None
 
     # ---- set-up -------------------------------------------------------------------------
     def setup(self) -> None:
@@ -71,13 +104,18 @@ class TrafficServer:
                              queue_size=1)
         if self.config.model_path and os.path.exists(self.config.model_path):
             self._load(self.config.model_path)
+            self._load_learned(learned_path(self.config.model_path))
         latch = dict(queue_size=1, latch=True)
         self.pub_window = rospy.Publisher("~crowd_costmap", OccupancyGrid, **latch)
         self.pub_now = rospy.Publisher("~crowd_costmap_now", OccupancyGrid, **latch)
-        rospy.Subscriber("people_counts", PeopleCount, self._inbox.put, queue_size=1000)
+        if self.config.source == "central":
+            self._start_central()
+        else:
+            rospy.Subscriber("people_counts", PeopleCount, self._inbox.put, queue_size=1000)
         rospy.Service("~predict_count", PredictCount, self._predict_count)
         rospy.Service("~predict_region", PredictRegion, self._predict_region)
         rospy.Service("~save_model", Trigger, self._save_service)
+        rospy.Service("~status", Trigger, lambda _req: TriggerResponse(True, self.learned_status()))
         threading.Thread(target=self._train_loop, name="crowd-training", daemon=True).start()
         rospy.Timer(rospy.Duration(self.config.publish_period), lambda _: self.publish())
         rospy.on_shutdown(self.shutdown)
@@ -89,6 +127,49 @@ class TrafficServer:
         self.model = PosteriorSnapshot.load(path)
         rospy.loginfo(f"traffic_gp: loaded {path} ({self.model.n_steps_} steps, "
                       f"{self.model.n_rows_} rows) in {time.perf_counter() - start:.2f} s")
+
+    def _load_learned(self, path: str) -> None:
+        """What the loaded model learned from (robots, rows, feed position), if it was saved."""
+        if not os.path.exists(path):
+            if self.config.source == "central":
+                rospy.logwarn(f"traffic_gp: {path} is missing: following the central feed from "
+                              f"its start (rows already in the model may be counted again)")
+            return
+        with open(path, encoding="utf-8") as stream:
+            saved = json.load(stream)
+        self.learned = {str(robot): [int(rows), int(count)]
+                        for robot, (rows, count) in saved.get("robots", {}).items()}
+        if self.config.source != "central" or saved.get("last_seq") is None:
+            return
+        if saved.get("central") == redact_url(self.config.central_url):
+            self.feed_seq = saved["last_seq"]
+        else:
+            rospy.logwarn(f"traffic_gp: the saved model learned from {saved.get('central')!r}, not "
+                          f"{redact_url(self.config.central_url)!r}: following the feed from its start")
+
+    def _start_central(self) -> None:
+        """Follow the central database's `_changes` feed into the inbox (a thread of its own)."""
+        self.follower = self.config.central_follower(
+            [PEOPLE_COUNT_TYPE], since=self.feed_seq if self.feed_seq is not None else 0)
+        rospy.loginfo(f"traffic_gp: learning from {self.follower.shown} (PeopleCount documents) "
+                      f"since sequence {self.follower.since}")
+        threading.Thread(target=self._follow_central, name="central-changes", daemon=True).start()
+
+    def _follow_central(self) -> None:
+        while not self._stop.is_set():
+            try:
+                for item in self.follower.follow(self._stop):
+                    try:
+                        msg = item.message.message()
+                    except StoreError as err:
+                        rospy.logwarn_throttle(10, f"traffic_gp: skipped central document "
+                                                   f"{item.message.id}: {err}")
+                        continue
+                    self._inbox.put(FeedCount(msg, item.message.robot_id or msg.robot_id, item.seq))
+            except Exception as err:  # noqa: BLE001 - keep following; the error is reported
+                rospy.logerr_throttle(30, f"traffic_gp: following {self.follower.shown} failed: "
+                                          f"{type(err).__name__}: {err}")
+                self._stop.wait(5.0)
 
     def _set_map(self, grid) -> None:
         with self._lock:
@@ -126,9 +207,14 @@ class TrafficServer:
     def _drain(self) -> None:
         while self.cells is not None:
             try:
-                msg = self._inbox.get_nowait()
+                item = self._inbox.get_nowait()
             except queue.Empty:
                 return
+            if isinstance(item, FeedCount):
+                msg, robot = item.msg, item.robot
+                self._pending_seq = item.seq
+            else:
+                msg, robot = item, item.robot_id
             try:
                 rows = self.to_rows(msg)
             except (TrafficError, ValueError) as err:
@@ -136,6 +222,9 @@ class TrafficServer:
                                            f"{msg.robot_id!r}: {err}")
                 continue
             self._pending.append(rows)
+            tally = self._pending_learned.setdefault(robot or "(no robot id)", [0, 0])
+            tally[0] += len(rows)
+            tally[1] += 1
             self.rows_seen += len(rows)
             self.last_stamp = max(self.last_stamp, msg.header.stamp.to_sec())
 
@@ -151,6 +240,8 @@ class TrafficServer:
         """Fold pending rows into the model; fit first once `min_rows` rows are there."""
         self._drain()
         if not self._pending:
+            with self._lock:
+                self._commit_learned()  # messages that gave no rows still move the feed on
             return
         new = Observations.concat(self._pending)
         if self.model is None and len(new) < self.config.min_rows:
@@ -161,12 +252,14 @@ class TrafficServer:
                 self.model = trainable
         steps = self.config.initial_steps if self.model is None else self.model.online_steps
         if self.model is None:
-            model = TrafficGP(**self.config.model).fit(new, n_steps=0)   # raises: rows kept
+            model = TrafficGP(**self.config.model).fit(new, n_steps=0, cells=self.cells)   # raises: rows kept
             with self._lock:
                 self.model = model
+                self._commit_learned()
         else:
             with self._lock:
                 self.model.partial_fit(new, n_steps=0)
+                self._commit_learned()
         self._pending = []
         for done in range(0, steps, self.config.chunk_steps):
             if self._stop.is_set():
@@ -176,6 +269,32 @@ class TrafficServer:
                                        n_steps=min(self.config.chunk_steps, steps - done))
         rospy.loginfo_throttle(30, f"traffic_gp: {self.model.n_rows_} rows, "
                                    f"{self.model.n_steps_} steps, ELBO {self.model.elbo_[-1]:.0f}")
+
+    def _commit_learned(self) -> None:
+        """The pending rows are in the model now (call with the lock held)."""
+        for robot, (rows, count) in self._pending_learned.items():
+            tally = self.learned.setdefault(robot, [0, 0])
+            tally[0] += rows
+            tally[1] += count
+        self._pending_learned = {}
+        if self._pending_seq is not None:
+            self.feed_seq, self._pending_seq = self._pending_seq, None
+
+    def learned_status(self) -> str:
+        """Which robots and how many rows (and messages) of each the model learned from."""
+        with self._lock:
+            learned = {robot: list(tally) for robot, tally in sorted(self.learned.items())}
+            model_rows = self.model.n_rows_ if self.model is not None else 0
+        robots = "; ".join(f"{robot}: {rows} rows from {count} messages"
+                           for robot, (rows, count) in learned.items()) or "none yet"
+        if self.follower is not None:
+            source = f"central {self.follower.shown} at sequence {json.dumps(self.feed_seq)}"
+            if self.follower.last_error:
+                source += f" (last error: {self.follower.last_error})"
+        else:
+            source = "topic people_counts"
+        return (f"model of {model_rows} rows; learned from {len(learned)} robots: {robots}; "
+                f"source {source}")
 
     # ---- answers --------------------------------------------------------------------------
     def now_hours(self, stamp=None) -> float:
@@ -257,6 +376,14 @@ class TrafficServer:
                     shutil.copyfile(self.model.path, self.config.model_path)
             else:
                 self.model.save(self.config.model_path, meta={"cell_size": self.config.cell_size})
+            learned = {"source": self.config.source, "last_seq": self.feed_seq,
+                       "central": (redact_url(self.config.central_url)
+                                   if self.config.source == "central" else None),
+                       "robots": {robot: list(tally) for robot, tally in self.learned.items()}}
+        path = learned_path(self.config.model_path)
+        with open(path + ".tmp", "w", encoding="utf-8") as stream:
+            json.dump(learned, stream)
+        os.replace(path + ".tmp", path)
         return self.config.model_path
 
     def shutdown(self) -> None:

@@ -9,7 +9,8 @@ from dataclasses import dataclass
 from typing import Any, Mapping, Optional
 
 from robot_common.errors import ConfigError
-from robot_common.params import NodeConfig, param
+from robot_common.params import param
+from ros_mongo.changes import CentralSourceParams
 
 __all__ = ["ServerConfig", "LOCAL_ZONE"]
 
@@ -17,7 +18,7 @@ LOCAL_ZONE = ("", "local")     # utc_offset_hours values that mean the machine's
 
 
 @dataclass
-class ServerConfig(NodeConfig):
+class ServerConfig(CentralSourceParams):
     """Parameters of the crowd-model server (see `ros_traffic.TrafficServer`)."""
 
     map_yaml: str = param("", "map_server .yaml of the map; empty: the map from the `map` topic")
@@ -45,7 +46,6 @@ class ServerConfig(NodeConfig):
                                         "resizes to it)")
     frame_id: str = param("map", "frame of the published cost maps")
     model: dict = param({}, "TrafficGP keyword arguments (empty: TrafficGP's defaults)")
-
     @classmethod
     def from_mapping(cls, params: Optional[Mapping[str, Any]] = None, **kwargs) -> "ServerConfig":
         """As `NodeConfig.from_mapping`; utc_offset_hours "" / "local" mean None (local zone)."""

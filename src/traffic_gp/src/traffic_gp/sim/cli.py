@@ -58,7 +58,7 @@ def train(args) -> dict:
     print(f"{len(views)} views -> {len(rows)} rows (per cell and minute) in "
           f"{time.perf_counter() - start:.1f} s", flush=True)
     model = TrafficGP(n_inducing=args.inducing, n_steps=args.steps, weekly=args.weekly,
-                      random_state=args.seed, progress=True).fit(rows)
+                      random_state=args.seed, progress=True).fit(rows, cells=sim.cells)
     meta = {"map": args.map, "cell_size": args.cell_size, "views": len(views), "seed": args.seed}
     model.save(args.out, meta=meta)
     print(f"trained {model.n_steps_} steps in {model.train_seconds_:.1f} s; saved {args.out}")

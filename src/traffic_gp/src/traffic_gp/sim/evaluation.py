@@ -3,6 +3,7 @@
 Works for any model with `predict(x, y, t, exposure)`; a model with `predict_latent` (the GP)
 is scored with its full predictive distribution, others as Poisson with their point rate.
 """
+from dataclasses import replace
 from pathlib import Path
 from typing import Dict, Optional, Sequence
 
@@ -11,7 +12,7 @@ from scipy import stats
 
 import traffic_gp.plots as plots
 import traffic_gp.predictive as predictive
-from robot_common.maps import load_map
+from robot_common.maps import FREE, OCCUPIED, GridMap, load_map
 from robot_sim.building import Building, generate_building
 from robot_sim.people import PeopleSimulator
 from traffic_gp.errors import ConfigError
@@ -20,27 +21,50 @@ from traffic_gp.observations import Observations
 WEDNESDAY = 48.0
 
 
-def simulator_for(map_spec: str, cell_size: float = 0.5, **options) -> PeopleSimulator:
-    """`generated:SEED` (a generated building) or a map_server .yaml file (halls derived)."""
+def closed_doors(building: Building) -> Building:
+    """The building with every door shut: free map cells outside all halls and rooms (the doors
+    in the walls) become walls, so nobody walks from a hall into a room."""
+    grid = building.grid
+    inside = np.zeros(grid.cells.shape, dtype=bool)
+    for area in building.areas:
+        (r0, c0), (r1, c1) = [grid.world_to_cell(x, y) for x, y in ((area.box[0], area.box[1]),
+                                                                      (area.box[2], area.box[3]))]
+        inside[max(r0, 0):r1, max(c0, 0):c1] = True
+    cells = grid.cells.copy()
+    cells[~inside & (cells == FREE)] = OCCUPIED
+    shut = GridMap(cells, grid.resolution, grid.origin, dict(grid.meta, doors="closed"))
+    return replace(building, grid=shut)
+
+
+def simulator_for(map_spec: str, cell_size: float = 0.5, *, doors_closed: bool = False,
+                  **options) -> PeopleSimulator:
+    """`generated:SEED` (a generated building; `doors_closed`: `closed_doors` of it) or a
+    map_server .yaml file (halls derived)."""
     if map_spec.startswith("generated"):
         _, _, seed = map_spec.partition(":")
         building: Building = generate_building(int(seed or 0))
+        if doors_closed:
+            building = closed_doors(building)
         return PeopleSimulator.from_building(building, cell_size, **options)
+    if doors_closed:
+        raise ConfigError("doors_closed needs a generated building (its rooms are known)")
     if not Path(map_spec).is_file():
         raise ConfigError(f"no map file {map_spec} (use a .yaml path or generated:SEED)")
     return PeopleSimulator.from_map(load_map(map_spec), cell_size, **options)
 
 
 def weekday_views(sim: PeopleSimulator, n_views: int, *, weeks: int = 2, start_week: int = 0,
-                  robots: int = 3, radius: float = 4.0, progress: bool = False):
+                  robots: int = 3, radius: float = 4.0, hall_share: float = 0.8,
+                  progress: bool = False):
     """About `n_views` views spread over the weekdays (robots work Monday to Friday) of `weeks`
-    weeks from `start_week`."""
+    weeks from `start_week`; `hall_share` of them from hall cells, the rest from any cell."""
     per_day = int(np.ceil(n_views / (weeks * 5)))
     views = []
     for week in range(start_week, start_week + weeks):
         for day in range(5):
             views += sim.observe(per_day, robots=robots, start=(week * 7 + day) * 24.0,
-                                 hours=24.0, radius=radius, progress=progress)
+                                 hours=24.0, radius=radius, hall_share=hall_share,
+                                 progress=progress)
     return views[:n_views]
 
 
@@ -96,6 +120,38 @@ def truth_in_band(model, sim: PeopleSimulator, times: Sequence[float], level: fl
     z = stats.norm.ppf(0.5 + level / 2.0)
     truth = np.log(np.maximum(sim.density(times).ravel(), 1e-12))
     return float(np.mean(np.abs(truth - mean) <= z * np.sqrt(var)))
+
+
+def cells_beside_main_hall(sim: PeopleSimulator, reach: float = 1.5) -> np.ndarray:
+    """Mask of the cells outside every hall whose centre is within `reach` metres (straight
+    line, through walls) of a main-hall cell: the rooms and corners beside the busiest hall."""
+    cells, main = sim.cells, sim.layout.main
+    beside = np.zeros(cells.n_cells, dtype=bool)
+    if not main.any():
+        return beside
+    hall_x, hall_y = cells.x[main], cells.y[main]
+    for i in np.nonzero(sim.layout.hall < 0)[0]:
+        beside[i] = np.min(np.hypot(hall_x - cells.x[i], hall_y - cells.y[i])) <= reach
+    return beside
+
+
+def wall_leakage(model, sim: PeopleSimulator, times: Sequence[float],
+                 reach: float = 1.5) -> Dict[str, float]:
+    """How much of the busiest hall's crowd a model puts beside it, where a simulator made with
+    `room_busy=0` has nobody: `leakage` = mean predicted count in the cells beside the main hall
+    (`cells_beside_main_hall`) / mean true count in the main-hall cells, over `times`; also
+    `leakage_max_cell` (the worst beside cell's mean over times, same denominator) and the
+    predicted / true main-hall ratio (`hall_ratio`)."""
+    beside, main = cells_beside_main_hall(sim, reach), sim.layout.main
+    if not beside.any() or not main.any():
+        raise ConfigError("the map has no main hall with cells beside it")
+    pred, truth = model_counts(model, sim, times), sim.expected_count(times)
+    hall_rate = float(truth[:, main].mean())
+    return {"leakage": float(pred[:, beside].mean()) / hall_rate,
+            "leakage_max_cell": float(pred[:, beside].mean(axis=0).max()) / hall_rate,
+            "truth_beside": float(truth[:, beside].mean()) / hall_rate,
+            "hall_ratio": float(pred[:, main].mean()) / hall_rate,
+            "beside_cells": int(beside.sum()), "main_cells": int(main.sum())}
 
 
 class TruthModel:

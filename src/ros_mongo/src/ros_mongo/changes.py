@@ -1,0 +1,201 @@
+"""Follow a CouchDB database's `_changes` feed: stored messages as they arrive, resumable (no ROS).
+
+A learner that trains from the central fleet database (every robot's replicated messages) follows
+its `_changes` feed from a sequence it saved: `ChangesFollower(url, selector=..., since=saved)`,
+then `poll()` (one request: the next page of changes) or `follow(stop_event)` (forever: polls
+every `poll_interval` seconds once caught up, reconnecting with back-off while the server is
+down). No long-poll: pouchdb-server ignores the long-poll `timeout` and holds the request until a
+change comes, which would also keep a follower from stopping. Each selected change comes as a
+`FeedItem`: the decoded `StoredMessage` (through ros_mongo.documents, as the CouchDB backend
+reads it) and `seq`, the feed position just after it; save the `seq` of the last item the
+learner has folded in, and a new follower started `since` it yields only later changes.
+
+The selector is a Mango-style dict evaluated here on each document (`selects`): top-level fields,
+each either a value (equality) or `{"$eq" | "$ne" | "$in" | "$nin" | "$exists": ...}`. It is not
+sent to the server: `_changes?filter=_selector` is documented for CouchDB >= 2 but kills
+pouchdb-server (/work/shared/DATABASES.md), so both servers get the plain feed and the follower
+drops the documents it does not want. Deletions (a robot's retention deletes only locally, but an
+operator may purge centrally) and design documents are never selected.
+
+Errors: `poll` raises ReplicationUnavailable (retry later) / ReplicationRefused /
+ReplicationError (ros_mongo.replication); `follow` retries all of them, with back-off, and keeps
+the last one in `last_error`. Messages never contain credentials (URLs redacted).
+"""
+import base64
+import logging
+import threading
+from dataclasses import dataclass
+from typing import Any, Dict, Iterator, List, NamedTuple, Optional, Sequence
+
+from robot_common.errors import ConfigError
+from robot_common.params import NodeConfig, param
+from ros_mongo.backends.couch import CouchStore
+from ros_mongo.documents import stored_message
+from ros_mongo.errors import StoreError
+from ros_mongo.records import StoredMessage
+from ros_mongo.replication import CouchDatabase, ReplicationError
+from ros_mongo.urls import with_credentials
+
+__all__ = ["FeedItem", "ChangesFollower", "matches_selector", "CentralSourceParams", "SOURCES"]
+
+logger = logging.getLogger(__name__)
+
+_OPERATORS = ("$eq", "$ne", "$in", "$nin", "$exists")
+
+
+class FeedItem(NamedTuple):
+    """One selected change: the stored message and the feed position just after it."""
+
+    seq: Any
+    message: StoredMessage
+
+
+def matches_selector(doc: Dict[str, Any], selector: Dict[str, Any]) -> bool:
+    """Whether `doc` meets every top-level condition of `selector` (see the module doc)."""
+    for name, condition in selector.items():
+        present = name in doc and doc[name] is not None
+        value = doc.get(name)
+        if not isinstance(condition, dict):
+            condition = {"$eq": condition}
+        for op, wanted in condition.items():
+            if op == "$eq" and not (present and value == wanted):
+                return False
+            if op == "$ne" and present and value == wanted:
+                return False
+            if op == "$in" and not (present and value in wanted):
+                return False
+            if op == "$nin" and present and value in wanted:
+                return False
+            if op == "$exists" and present != bool(wanted):
+                return False
+    return True
+
+
+class ChangesFollower:
+    """Follows the `_changes` feed of the CouchDB database at `url` (credentials allowed in `url`;
+    never shown) from `since`, yielding the message documents that match `selector`."""
+
+    def __init__(self, url: str, *, selector: Optional[Dict[str, Any]] = None, since: Any = 0,
+                 poll_interval: float = 1.0, page: int = 200, timeout: float = 10.0,
+                 backoff_min: float = 0.5, backoff_max: float = 30.0):
+        if page < 1 or poll_interval <= 0 or not 0 < backoff_min <= backoff_max:
+            raise ReplicationError(f"bad follower settings: page {page}, poll interval "
+                                   f"{poll_interval} s, back-off {backoff_min}..{backoff_max} s")
+        for name, condition in (selector or {}).items():
+            if isinstance(condition, dict) and set(condition) - set(_OPERATORS):
+                raise ReplicationError(f"selector field {name!r}: only {', '.join(_OPERATORS)} "
+                                       f"are supported, got {sorted(condition)}")
+        self.database = CouchDatabase(url, timeout=timeout)
+        self.store = CouchStore(url, timeout=timeout)  # decoding: types, attachments (never connected)
+        self.selector = dict({"kind": "message"}, **(selector or {}))
+        self.since: Any = since if since is not None else 0
+        self.poll_interval = poll_interval
+        self.page = page
+        self.backoff_min = backoff_min
+        self.backoff_max = backoff_max
+        self.last_error = ""
+        self.caught_up = False  # the last poll reached the end of the feed
+        self.skipped = 0  # selected documents that could not be decoded
+
+    @property
+    def shown(self) -> str:
+        """The database URL without its password."""
+        return self.database.shown
+
+    def selects(self, doc: Dict[str, Any]) -> bool:
+        """Whether a changed document is wanted (never a deletion or a design document)."""
+        if not doc or doc.get("_deleted") or str(doc.get("_id", "")).startswith("_design/"):
+            return False
+        return matches_selector(doc, self.selector)
+
+    def _decode(self, doc: Dict[str, Any]) -> Optional[StoredMessage]:
+        try:
+            raw = base64.b64decode(doc["raw"]) if doc.get("raw") is not None else None
+            return stored_message(doc, raw, self.store._load_blob, self.store.message_class)
+        except (StoreError, ValueError, TypeError) as err:
+            self.skipped += 1
+            logger.warning("changes of %s: skipped document %r: %s", self.shown, doc.get("_id"), err)
+            return None
+
+    def poll(self) -> List[FeedItem]:
+        """One request: the selected changes among the next `page` changes after `since`.
+        Advances `since`; `caught_up` tells whether the feed's end was reached."""
+        params = {"since": str(self.since), "include_docs": "true", "limit": str(self.page)}
+        answer = self.database.json("GET", "/_changes", params=params)
+        self.caught_up = len(answer.get("results", [])) < self.page
+        items: List[FeedItem] = []
+        for change in answer.get("results", []):
+            seq = change.get("seq", self.since)
+            doc = change.get("doc") or {}
+            if not change.get("deleted") and self.selects(doc):
+                message = self._decode(doc)
+                if message is not None:
+                    items.append(FeedItem(seq, message))
+            self.since = seq
+        self.since = answer.get("last_seq", self.since)
+        return items
+
+    def follow(self, stop: threading.Event) -> Iterator[FeedItem]:
+        """Selected changes, forever (until `stop` is set): polls every `poll_interval` seconds
+        once caught up; reconnects with exponential back-off while the server is unreachable or
+        answers errors."""
+        delay = self.backoff_min
+        while not stop.is_set():
+            try:
+                items = self.poll()
+            except ReplicationError as err:
+                if str(err) != self.last_error:
+                    logger.warning("changes of %s: %s (retrying)", self.shown, err)
+                self.last_error = str(err)
+                stop.wait(delay)
+                delay = min(self.backoff_max, delay * 2)
+                continue
+            self.last_error = ""
+            delay = self.backoff_min
+            yield from items
+            if self.caught_up:
+                stop.wait(self.poll_interval)
+
+    def close(self) -> None:
+        """Close the HTTP sessions."""
+        self.database.close()
+        self.store.close()
+
+
+
+SOURCES = ("topic", "central")  # where a learner's messages come from
+
+
+@dataclass
+class CentralSourceParams(NodeConfig):
+    """The parameters of a learner node that can learn from the central fleet database instead
+    of its topics (subclass it: the node's own parameters follow these)."""
+
+    source: str = param("topic", "where the learner's messages come from: its topics (topic) or "
+                                 "the central fleet database's _changes feed, every robot's "
+                                 "messages (central)", choices=SOURCES)
+    central_url: str = param("", "source central: the central CouchDB database URL, e.g. "
+                                 "http://central:5984/fleet (password-free)")
+    central_credentials_file: str = param("", "source central: file with user:password for "
+                                              "central_url (or ROS_MONGO_DB_USER / "
+                                              "ROS_MONGO_DB_PASSWORD in the environment)")
+    central_topics: List[str] = param([], "source central: recorded topics of the messages to "
+                                          "learn from; empty: every topic")
+
+    def check(self) -> None:
+        if self.source == "central" and not self.central_url.startswith(("http://", "https://")):
+            raise ConfigError("~central_url must be the central CouchDB database URL "
+                              "(http:// or https://) when ~source is central")
+
+    def central_follower(self, types: Sequence[str], since: Any = 0,
+                         topics: Optional[Sequence[str]] = None) -> "ChangesFollower":
+        """A follower of the central feed's message documents of `types` on `topics` (default:
+        `central_topics`; empty: every topic), from `since`, with the credentials of
+        `central_credentials_file`."""
+        url = with_credentials(self.central_url,
+                               credentials_file=self.central_credentials_file or None)
+        selector: Dict[str, Any] = {"type": {"$in": list(types)}}
+        topics = self.central_topics if topics is None else topics
+        if topics:
+            selector["topic"] = {"$in": list(topics)}
+        return ChangesFollower(url, selector=selector, since=since)
