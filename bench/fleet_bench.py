@@ -22,6 +22,7 @@ Printed, written to artifacts/bench/fleet.json, plot artifacts/bench/fleet_lag.p
 import argparse
 import json
 import math
+import re
 import shutil
 import struct
 import sys
@@ -103,12 +104,19 @@ def publish(duration: float) -> int:
 
 # -- measuring -----------------------------------------------------------------------------------
 
+MESSAGE_ID = re.compile(r"^(\d{19})-")  # message ids start with the receive time in ns
+
+
 class CentralWatch:
-    """Follows the central `_changes` feed: arrival time and size of every message document."""
+    """Follows the central `_changes` feed: arrival time of every message document.
+
+    The feed is read without documents (the receive time is the first part of a message id),
+    so a busy central server answers it quickly and the arrival time is close to when central
+    stored the message; sizes are read once at the end (`sizes`)."""
 
     def __init__(self, db_url: str):
         self.db_url = db_url
-        self.arrivals = {}  # id -> (arrival wall time, receive_time, robot, bytes)
+        self.arrivals = {}  # id -> (arrival wall time, receive time)
         self.since = "0"
         self._stop = threading.Event()
         self.thread = threading.Thread(target=self._run, daemon=True)
@@ -118,26 +126,42 @@ class CentralWatch:
         session = requests.Session()
         while not self._stop.is_set():
             try:
-                answer = session.get(self.db_url + "/_changes", timeout=70, params={
+                answer = session.get(self.db_url + "/_changes", timeout=120, params={
                     "since": self.since, "feed": "longpoll", "timeout": "5000",
-                    "include_docs": "true", "limit": "2000"}).json()
+                    "limit": "5000"}).json()
             except (requests.RequestException, ValueError):
                 time.sleep(0.5)  # the central server is down: look again
                 continue
             now = time.time()
             for change in answer.get("results", []):
-                doc = change.get("doc") or {}
-                if doc.get("kind") == "message" and change["id"] not in self.arrivals:
-                    size = doc.get("size", 0)
-                    self.arrivals[change["id"]] = (now, doc["receive_time"], doc.get("robot_id"), size)
+                match = MESSAGE_ID.match(change["id"])
+                if match and not change.get("deleted") and change["id"] not in self.arrivals:
+                    self.arrivals[change["id"]] = (now, int(match.group(1)) / 1e9)
             self.since = str(answer.get("last_seq", self.since))
 
     def count(self) -> int:
         return len(self.arrivals)
 
     def stop(self):
+        """Stop following (a long poll with nothing new may stay open: the thread is a daemon)."""
         self._stop.set()
-        self.thread.join(timeout=80)
+        self.thread.join(timeout=10)
+
+    def sizes(self) -> dict:
+        """{message id: stored bytes} of every central message (read once, after the run)."""
+        found, start = {}, None
+        while True:
+            params = {"include_docs": "true", "limit": "1001"}
+            if start is not None:
+                params["startkey"] = json.dumps(start)
+            rows = requests.get(self.db_url + "/_all_docs", params=params, timeout=300).json()["rows"]
+            for row in rows[:1000]:
+                doc = row.get("doc") or {}
+                if doc.get("kind") == "message":
+                    found[row["id"]] = doc.get("size", 0)
+            if len(rows) <= 1000:
+                return found
+            start = rows[1000]["id"]
 
 
 def local_messages(db_url: str) -> int:
@@ -148,12 +172,12 @@ def local_messages(db_url: str) -> int:
 
 
 class Robot:
-    def __init__(self, index, work: Path, **launch_args):
+    def __init__(self, index, work: Path, local_topics=()):
         self.robot_id = f"robot{index}"
         self.work = work / self.robot_id
         self.core = RosCore(log_dir=self.work / "ros").start()
         self.launches = LaunchSet(self.core, self.work / "launch")
-        self.launch_args = launch_args
+        self.local_topics = list(local_topics)
         self.store = None
         self.publisher = None
 
@@ -162,11 +186,14 @@ class Robot:
         self.url = self.store.database_url("robot_data")
         self.launches(str(ROOT / "launch" / "fleet.launch"), central_url=central_url,
                       robot_id=self.robot_id, local_db="false", local_db_port=self.store.port,
-                      topics=TOPICS, spool_path=str(self.work / "spool"))
+                      topics=TOPICS, local_topics=_yaml_list(self.local_topics),
+                      spool_path=str(self.work / "spool"))
 
     def start_direct(self, central_db_url):
+        topics = [t for t in RATES if t not in self.local_topics]  # what central gets either way
         self.launches("ros_mongo", "ros_mongo_server.launch", db_url=central_db_url,
-                      robot_id=self.robot_id, topics=TOPICS, spool_path=str(self.work / "spool_direct"))
+                      robot_id=self.robot_id, topics=_yaml_list(topics),
+                      spool_path=str(self.work / "spool_direct"))
 
     def publish(self, duration):
         self.publisher = ManagedProcess([sys.executable, __file__, "--publish", duration],
@@ -175,9 +202,11 @@ class Robot:
                                         env=self.core.env()).start()
 
     def published(self) -> int:
+        """Messages published on the topics that go to central."""
         for line in self.publisher.log_path.read_text().splitlines():
             if line.startswith("{"):
-                return sum(json.loads(line)["published"].values())
+                return sum(n for topic, n in json.loads(line)["published"].items()
+                           if topic not in self.local_topics)
         raise RuntimeError(f"publisher of {self.robot_id} printed no counts:\n{self.publisher.log_tail()}")
 
     def close(self):
@@ -187,6 +216,10 @@ class Robot:
         if self.store is not None:
             self.store.stop()
         self.core.stop()
+
+
+def _yaml_list(topics) -> str:
+    return "[" + ", ".join(topics) + "]"
 
 
 def _percentiles(values):
@@ -202,12 +235,13 @@ def _progress(what, watch, expected=None):
     print(f"  {time.strftime('%H:%M:%S')} {what}: {watch.count()}{total} messages central", flush=True)
 
 
-def run_replicated(work: Path, robots_n: int, duration: float, partition: float, tail: float):
+def run_replicated(work: Path, robots_n: int, duration: float, partition: float, tail: float,
+                   local_topics=()):
     central = PouchDBServer(work / "central").start()
     central_url = central.database_url("fleet")
     robots = []
     try:
-        robots = [Robot(i, work / "replicated") for i in range(1, robots_n + 1)]
+        robots = [Robot(i, work / "replicated", local_topics) for i in range(1, robots_n + 1)]
         for robot in robots:
             robot.start_fleet(central_url)
         wait_until(lambda: requests.get(central_url, timeout=5).ok, 300, what="central database")
@@ -230,11 +264,12 @@ def run_replicated(work: Path, robots_n: int, duration: float, partition: float,
                    what="publishers done")
         published = sum(r.published() for r in robots)
         _drain(watch, published, "draining")
-        arrivals = list(watch.arrivals.values())
-        steady = [a - r for a, r, _, _ in arrivals if t0 + 5 <= r < t_cut]
-        before_heal = [a for a, r, _, _ in arrivals if r < t_heal]
+        sizes = watch.sizes()
+        arrivals = [(a, r, sizes.get(i, 0)) for i, (a, r) in list(watch.arrivals.items())]
+        steady = [a - r for a, r, _ in arrivals if t0 + 5 <= r < t_cut]
+        before_heal = [a for a, r, _ in arrivals if r < t_heal]
         catch_up = max(before_heal) - t_heal if before_heal else None
-        window = [(a, s) for a, r, _, s in arrivals if t_heal <= a <= t_heal + (catch_up or 0)]
+        window = [(a, s) for a, r, s in arrivals if t_heal <= a <= t_heal + (catch_up or 0)]
         stored = len(arrivals)
         first, last = min(a for a, *_ in arrivals), max(a for a, *_ in arrivals)
         result = {
@@ -245,7 +280,7 @@ def run_replicated(work: Path, robots_n: int, duration: float, partition: float,
             "catch_up_rate_msgs_per_s": len(window) / catch_up if catch_up else None,
             "catch_up_mb_per_s": sum(s for _, s in window) / 2 ** 20 / catch_up if catch_up else None,
             "central_msgs_per_s_overall": stored / (last - first) if last > first else None,
-            "timeline": [(a - t0, a - r) for a, r, _, _ in sorted(arrivals)][::5],
+            "timeline": [(a - t0, a - r) for a, r, _ in sorted(arrivals)][::5],
             "cut_at": t_cut - t0, "heal_at": t_heal - t0,
         }
         return result
@@ -256,10 +291,10 @@ def run_replicated(work: Path, robots_n: int, duration: float, partition: float,
 
 
 def _drain(watch, published: int, label: str) -> None:
-    """Wait until central holds every published message or nothing arrived for 120 s, then stop
+    """Wait until central holds every published message or nothing arrived for 600 s, then stop
     watching."""
     last_change, last_count = time.time(), -1
-    while watch.count() < published and time.time() - last_change < 120:
+    while watch.count() < published and time.time() - last_change < 600:
         time.sleep(2)
         if watch.count() != last_count:
             last_change, last_count = time.time(), watch.count()
@@ -267,12 +302,12 @@ def _drain(watch, published: int, label: str) -> None:
     watch.stop()
 
 
-def run_direct(work: Path, robots_n: int, duration: float):
+def run_direct(work: Path, robots_n: int, duration: float, local_topics=()):
     central = PouchDBServer(work / "central_direct").start()
     central_url = central.database_url("fleet")
     robots = []
     try:
-        robots = [Robot(i, work / "direct") for i in range(1, robots_n + 1)]
+        robots = [Robot(i, work / "direct", local_topics) for i in range(1, robots_n + 1)]
         for robot in robots:
             robot.start_direct(central_url)  # the recorders create the database
         watch = CentralWatch(central_url)
@@ -284,7 +319,7 @@ def run_direct(work: Path, robots_n: int, duration: float):
         published = sum(r.published() for r in robots)
         _drain(watch, published, "direct")
         arrivals = list(watch.arrivals.values())
-        lags = [a - r for a, r, _, _ in arrivals if r >= t0 + 5]
+        lags = [a - r for a, r in arrivals if r >= t0 + 5]
         first, last = min(a for a, *_ in arrivals), max(a for a, *_ in arrivals)
         return {"published": published, "central": len(arrivals),
                 "lost": published - len(arrivals), "lag_s": _percentiles(lags),
@@ -309,7 +344,8 @@ def plot(result, output: Path):
                label="central server down")
     ax.set_xlabel("seconds since the robots started publishing")
     ax.set_ylabel("lag (s)")
-    ax.set_title("Fleet replication: 3 robots -> central (pouchdb-server)")
+    kept = f"; kept local: {', '.join(result['local_topics'])}" if result["local_topics"] else ""
+    ax.set_title(f"Fleet replication: {result['robots']} robots -> central (pouchdb-server){kept}")
     ax.legend(loc="upper left")
     fig.tight_layout()
     fig.savefig(output / "fleet_lag.png", dpi=120)
@@ -323,6 +359,9 @@ def main() -> int:
     parser.add_argument("--partition", type=float, help="seconds the central server is down (60)")
     parser.add_argument("--tail", type=float, default=20.0, help="seconds published after the partition")
     parser.add_argument("--robots", type=int, default=3)
+    parser.add_argument("--local-topics", nargs="*", default=[], metavar="TOPIC",
+                        help="topics kept on the robots (fleet.launch local_topics), e.g. "
+                             "/camera/rgb/image_raw; the direct run then records only the others")
     parser.add_argument("--output", type=Path, default=ROOT / "artifacts" / "bench")
     args, _ = parser.parse_known_args()
     if args.publish is not None:
@@ -334,11 +373,14 @@ def main() -> int:
     shutil.rmtree(work, ignore_errors=True)
     print(f"replicated run: {args.robots} robots, {duration:.0f} s steady, {partition:.0f} s "
           f"partition, {args.tail:.0f} s after", flush=True)
-    replicated = run_replicated(work, args.robots, duration, partition, args.tail)
+    if args.local_topics:
+        print(f"kept on the robots: {', '.join(args.local_topics)}", flush=True)
+    replicated = run_replicated(work, args.robots, duration, partition, args.tail, args.local_topics)
     print(f"direct run: {args.robots} robots writing to the central server for {duration:.0f} s",
           flush=True)
-    direct = run_direct(work, args.robots, duration)
-    result = {"robots": args.robots, "rates_hz": RATES, "replicated": replicated, "direct": direct}
+    direct = run_direct(work, args.robots, duration, args.local_topics)
+    result = {"robots": args.robots, "rates_hz": RATES, "local_topics": args.local_topics,
+              "replicated": replicated, "direct": direct}
     if direct["central_msgs_per_s_overall"] and replicated["catch_up_rate_msgs_per_s"]:
         result["catch_up_rate_over_direct_rate"] = (replicated["catch_up_rate_msgs_per_s"]
                                                     / direct["central_msgs_per_s_overall"])

@@ -5,13 +5,15 @@ synthetic expert (sanity), with CIOC (Levine and Koltun 2012).
 1. People (issue 14; headline): for each person-like style (cautious, sporty, steady) and for 10
    demos mixed from all styles, on static, moving and oscillating obstacles: 10 demonstrations
    (lfd_controller.demonstrators; they do not optimise our features), a reward learned with
-   LinearCIOC over learning.person_features() with the sign prior PERSON_SIGNS, driven by the
-   receding-horizon controller on held-out starts (100; --quick 10) with
-   planner.CollisionBarrier (a fixed, not learned, penalty inside robot + obstacle radius +
-   0.1 m) added to the learned reward; behaviour cloning tuned on validation starts (size, L2
-   regularisation, three initialisations; clean + DART noise-injected drives); the driver's own
-   success on the same starts as the reference ceiling. Two obstacle/goal layouts no demo showed
-   are driven with the reward and the clone learned on the static scenario.
+   learning.fit_person_reward (LinearCIOC over person_features(), sign prior PERSON_SIGNS, 4 s
+   windows from the recorded states, Gauss-Newton Hessian, learned command noise), driven by the
+   receding-horizon controller (learning.PERSON_CONTROLLER: 8 s look-ahead, detour seeds) on
+   held-out starts (100; --quick 10) with planner.CollisionBarrier (a fixed, not learned, penalty
+   inside robot + obstacle radius + 0.1 m) added to the learned reward; behaviour cloning tuned
+   on validation starts (size, L2 regularisation, three initialisations; clean + DART
+   noise-injected drives); the driver's own success on the same starts as the reference
+   ceiling. Two obstacle/goal layouts no demo showed are driven with the reward and the clone
+   learned on the static scenario.
    Targets: learned-controller success >= 90 % and >= 0.9 x the driver's, >= 20 points above
    behaviour cloning, collision rate <= the driver's.
 2. Synthetic expert (sanity row): reward recovery (cosine, reward loss) for 4, 8, 16 demos and the
@@ -44,7 +46,7 @@ from lfd_controller.demos import trim_to_goal  # noqa: E402
 from lfd_controller.expert import SyntheticExpert, true_reward  # noqa: E402
 from lfd_controller.features import Task  # noqa: E402
 from lfd_controller.gp_cioc import GPCIOC  # noqa: E402
-from lfd_controller.learning import PERSON_SIGNS, fit_reward, person_features  # noqa: E402
+from lfd_controller.learning import PERSON_CONTROLLER, fit_person_reward  # noqa: E402
 from lfd_controller.planner import (  # noqa: E402
     CollisionBarrier,
     RecedingHorizonController,
@@ -229,7 +231,7 @@ def driver_reference(scenario, group, starts, seed):
 def controller_episodes(reward, scenario, starts, desc, cycle_times, barrier=True):
     task = Task.from_scenario(scenario)
     planned = CollisionBarrier(reward, scenario.clearance) if barrier else reward
-    controller = RecedingHorizonController(planned, scenario.model(), budget=0.1)
+    controller = RecedingHorizonController(planned, scenario.model(), budget=0.1, **PERSON_CONTROLLER)
     episodes = []
     for start in tqdm(starts, desc=desc, leave=False):
         controller.reset()
@@ -246,9 +248,9 @@ def clone_episodes(clone, scenario, starts):
 def learn_group(scenario, group, args):
     """(reward, tuned clone, info) from 10 demos of `group` in `scenario`."""
     starts = scenario.sample_starts(10, seed=3)
-    demos = [trim_to_goal(d, 0) for d in person_demos(scenario, group, starts, seed=1)]
+    demos = person_demos(scenario, group, starts, seed=1)
     started = time.monotonic()
-    reward, learner = fit_reward(demos, "linear", 0, person_features(), PERSON_SIGNS)
+    reward, learner = fit_person_reward(demos)
     learn_s = time.monotonic() - started
     train = person_demos(scenario, group, starts, seed=1) + dart_demos(scenario, group, starts, seed=2)
     validation = scenario.sample_starts(10, seed=5)
@@ -257,7 +259,9 @@ def learn_group(scenario, group, args):
         train, lambda c: np.mean([e.success for e in clone_episodes(c, scenario, validation)]),
         grid=grid, seeds=(0,) if args.quick else (0, 1, 2))
     weights = dict(zip(reward.features.names, np.round(reward.weights, 4).tolist()))
+    noise = None if learner.noise_std_ is None else np.round(learner.noise_std_, 4).tolist()
     return reward, clone, {"demos": len(demos), "learn_s": learn_s, "weights": weights,
+                           "noise_std": noise,
                            "bc_choice": clone.get_params(), "bc_validation": table}
 
 
@@ -305,12 +309,12 @@ def people(args, results):
         print(f"  controller cycle (person rewards): mean {cycle.mean():.1f} ms, p95 "
               f"{np.percentile(cycle, 95):.1f} ms (budget 100 ms)", flush=True)
     plot_people(rows)
-    if not args.quick:
+    if not args.quick or args.learn_time:
         scenario = load_scenario("static_obstacle")
         starts = scenario.sample_starts(16, seed=6)
         demos = [trim_to_goal(d, 0) for d in person_demos(scenario, "mixed", starts, seed=7)]
         started = time.monotonic()
-        fit_reward(demos, "linear", 0, person_features(), PERSON_SIGNS)
+        fit_person_reward(demos)
         seconds = time.monotonic() - started
         results.setdefault("cost", {})["learn_16_person_demos_s"] = seconds
         print(f"  learning time, 16 mixed person demos ({sum(d.length for d in demos)} steps): "
@@ -348,6 +352,8 @@ def main(argv=None) -> int:
     parser.add_argument("--only", choices=["people", "recovery", "behaviour"], help="run one part")
     parser.add_argument("--runs", type=int, help="held-out starts per person row (default 100; "
                                                  "--quick 10)")
+    parser.add_argument("--learn-time", action="store_true",
+                        help="with --quick: also time learning 16 mixed person demos")
     parser.add_argument("--styles", nargs="*", choices=sorted(STYLES) + ["mixed"],
                         help="person-like groups to run (default: all styles and mixed)")
     args = parser.parse_args(argv)

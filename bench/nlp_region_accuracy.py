@@ -28,13 +28,25 @@ Writes artifacts/bench/nlp_region_accuracy.json and nlp_region_accuracy.png.
 
     python bench/nlp_region_accuracy.py --shipped [--cache-dir DIR] [--with-brown [--brown PATH]]
 
-The two shipped configurations only, as the nodes run them (the sentence backend with the phrase
-method; word2vec with `source` auto, i.e. what a robot without PyTorch gets: Brown + WordNet
-glosses when a Brown corpus is found (NLTK's places or --brown), else the glosses alone; word
-method with WordNet labels and hubness), on the held-out test set
-bench/data/region_test_real.yaml (149 phrases over the labels of a real floor, never used for a
-choice), top-1 / top-3 with 95% Wilson intervals; also on the dev sets, marked as such.
-Writes artifacts/bench/nlp_region_accuracy_shipped.json and .png (the test rows).
+The shipped configurations only, as the nodes run them (the sentence backend with the phrase
+method; word2vec with `source` auto: Brown + WordNet glosses when a Brown corpus is found
+(NLTK's places, or --brown with --with-brown; the 2026-11-25 run of "auto" found the shared
+Brown zip through a search that was dropped after it), and the WordNet glosses alone, what a
+robot without Brown gets; word method with WordNet labels and hubness), each with
+the real floor's label descriptions (src/region_search/config/towne_levine_descriptions.yaml)
+and without, plus the settings of issue 18's first round for comparison, on the held-out test
+set bench/data/region_test_real_2.yaml (168 phrases over the labels of a real floor, written
+before anything ran on them, never used for a choice), top-1 / top-3 with 95% Wilson intervals;
+also on the dev sets, marked as such. Writes artifacts/bench/nlp_region_accuracy_shipped.json
+and .png (the test rows).
+
+    python bench/nlp_region_accuracy.py --dev2 [--quick] [--cache-dir DIR]
+
+Issue 18's second round, on the dev sets only (region_eval_real.yaml, region_eval.yaml and the
+first real-floor test set region_test_real.yaml, whose answers had been seen): numbers said as
+words, label descriptions (expanded with WordNet or not, their weight) and the name shares of
+both methods; prints every variant's dev figures and the best of each family. Writes
+artifacts/bench/nlp_region_accuracy_dev_round2.json.
 
     python bench/nlp_region_accuracy.py --dev [--cache-dir DIR]
 
@@ -58,7 +70,7 @@ from pathlib import Path
 from nlp_common import (
     BROWN_ZIP,
     OUT_DIR,
-    REAL_TEST_FILE,
+    REAL_TEST_2_FILE,
     evaluate,
     fresh_process_load_seconds,
     load_dev_sets,
@@ -71,7 +83,7 @@ from nlp_common import (
 from region_search.corpora import WordNet
 from region_search.embeddings import WordEmbeddings
 from region_search.phrase import PhraseRegionRecommender
-from region_search.recommender import Region, RegionRecommender
+from region_search.recommender import ExpansionWeights, Region, RegionRecommender
 from region_search.sentence import load_sentence_model
 from region_search.text_similarity import content_words, string_baseline_score, tokenize
 from region_search.training import Word2VecParams, load_embeddings
@@ -82,9 +94,13 @@ FALLBACK = "brown+wordnet expanded/align+spelling+hubness + name share"
 BEFORE = {"name_text_weight": 0.0}
 
 
-def recommender_ranker(recommender: RegionRecommender):
+def recommender_ranker(recommender: RegionRecommender, descriptions: bool = False):
+    """rank(phrase, labels); `descriptions`: give the regions the labels' descriptions (when the
+    set has any: nlp_common.DescribedLabels)."""
     def rank(phrase, labels):
-        recommender.set_regions([Region(name, 0.0, 0.0) for name in labels])
+        described = getattr(labels, "descriptions", {}) if descriptions else {}
+        recommender.set_regions([Region(name, 0.0, 0.0, description=described.get(name, ""))
+                                 for name in labels])
         return [r.region.name for r in recommender.recommend(phrase, top_k=0).results]
     return rank
 
@@ -143,6 +159,15 @@ def main() -> int:
                              "with 95%% Wilson intervals")
     parser.add_argument("--dev", action="store_true",
                         help="choose the issue-18 settings on the dev sets (a grid)")
+    parser.add_argument("--dev2", action="store_true",
+                        help="issue 18 round 2: descriptions, spoken numbers, weights on the dev "
+                             "sets (with --quick: word2vec on WordNet glosses only)")
+    parser.add_argument("--sources", default="wordnet,brown+wordnet",
+                        help="--dev2: the word2vec corpora to compare (comma-separated)")
+    parser.add_argument("--shipped-sources", default="auto,wordnet",
+                        help="--shipped: the word2vec sources to report (comma-separated)")
+    parser.add_argument("--skip-sentence", action="store_true",
+                        help="--shipped: word2vec configurations only")
     parser.add_argument("--with-brown", action="store_true",
                         help="--shipped: word2vec auto with --brown (default: only a Brown corpus "
                              "found where NLTK looks, as the nodes' default brown_path '')")
@@ -153,6 +178,8 @@ def main() -> int:
         return shipped(args)
     if args.dev:
         return dev_choice(args)
+    if args.dev2:
+        return dev_round2(args)
     buildings = load_eval()
     n_queries = sum(len(b["queries"]) for b in buildings.values())
     print(f"evaluation set: {n_queries} queries over {len(buildings)} buildings "
@@ -204,46 +231,64 @@ def summarize(rows) -> dict:
 
 
 def shipped_recommenders(args, wordnet):
-    """{name: recommender} of the two shipped configurations (the nodes' defaults) and the
-    word2vec load info."""
-    sentence = load_sentence_model()
-    brown = args.brown if args.with_brown else ""  # "": where NLTK looks, as the nodes do
-    embeddings, info = load_embeddings("auto", brown_path=brown, params=Word2VecParams(),
-                                       cache_dir=args.cache_dir or None, progress=True)
-    word2vec = f"word2vec auto = {'+'.join(info['corpora'])} (word method)"
-    configs = {
-        "sentence (phrase method)": PhraseRegionRecommender(sentence.embed_phrases, wordnet=wordnet),
-        word2vec: RegionRecommender(embeddings.embed_words, wordnet=wordnet, hubness=True),
-        # For comparison only (nothing is chosen from them): the settings before issue 18.
-        "sentence, before issue 18": PhraseRegionRecommender(
-            sentence.embed_phrases, wordnet=wordnet, name_text_weight=0.0,
-            name_spelling_weight=0.0),
-        f"{word2vec.split(' (')[0]}, before issue 18": RegionRecommender(
-            embeddings.embed_words, wordnet=wordnet, hubness=True, name_text_weight=0.0),
+    """{name: (recommender, use the label descriptions)} of the shipped configurations (the
+    nodes' defaults) and the word2vec load infos. word2vec: `source` auto as the node runs it
+    (Brown + WordNet glosses when a Brown corpus is found: NLTK's places, or --brown with
+    --with-brown) and WordNet glosses alone (a robot without Brown)."""
+    sentence = None if args.skip_sentence else load_sentence_model()
+    brown = args.brown if args.with_brown else ""  # "": where the node looks (find_brown)
+    infos = {}
+    word2vec = {}
+    for source in args.shipped_sources.split(","):
+        embeddings, info = load_embeddings(source, brown_path=brown, params=Word2VecParams(),
+                                           cache_dir=args.cache_dir or None, progress=True)
+        corpora = "+".join(info["corpora"])
+        if corpora in word2vec:
+            continue
+        infos[corpora] = info
+        word2vec[corpora] = (embeddings, "auto = " + corpora if source == "auto"
+                             else corpora + " (robot without Brown)")
+    configs = {} if args.skip_sentence else {
+        "sentence (phrase method)": (PhraseRegionRecommender(sentence.embed_phrases,
+                                                             wordnet=wordnet), True),
+        "sentence, no label descriptions": (PhraseRegionRecommender(sentence.embed_phrases,
+                                                                    wordnet=wordnet), False),
+        # For comparison only (nothing is chosen from it): round 1 of issue 18.
+        "sentence, round-1 settings": (PhraseRegionRecommender(
+            sentence.embed_phrases, wordnet=wordnet, number_words=False, **ROUND1_SENTENCE),
+            False),
     }
-    return configs, info, sentence
+    for embeddings, title in word2vec.values():
+        configs[f"word2vec {title}"] = (RegionRecommender(
+            embeddings.embed_words, wordnet=wordnet, hubness=True), True)
+        configs[f"word2vec {title.split(' (')[0]}, no label descriptions"] = (RegionRecommender(
+            embeddings.embed_words, wordnet=wordnet, hubness=True), False)
+        configs[f"word2vec {title.split(' (')[0]}, round-1 settings"] = (RegionRecommender(
+            embeddings.embed_words, wordnet=wordnet, hubness=True, number_words=False,
+            **round1_word()), False)
+    return configs, infos, sentence
 
 
 def shipped(args) -> int:
     """The shipped configurations on the held-out test set (see the module docstring)."""
     wordnet = WordNet()
-    configs, info, sentence = shipped_recommenders(args, wordnet)
-    sets = {"held-out test: real floor, region_test_real.yaml": load_real_eval(REAL_TEST_FILE)}
+    configs, infos, sentence = shipped_recommenders(args, wordnet)
+    sets = {"held-out test: real floor, region_test_real_2.yaml": load_real_eval(REAL_TEST_2_FILE)}
     sets.update({f"dev (settings chosen here): {name}": buildings
                  for name, buildings in load_dev_sets().items()})
     table, rows = {}, {}
-    for config, recommender in configs.items():
-        ranker = recommender_ranker(recommender)
+    for config, (recommender, described) in configs.items():
+        ranker = recommender_ranker(recommender, descriptions=described)
         for name, buildings in sets.items():
             rows[(config, name)] = evaluate(ranker, buildings)["queries"]
             table[(config, name)] = summarize(rows[(config, name)])
-    print(f"\n{'configuration':44s} {'set':60s} {'n':>3s}  {'top-1 (95% CI)':>20s}  "
+    print(f"\n{'configuration':58s} {'set':60s} {'n':>3s}  {'top-1 (95% CI)':>20s}  "
           f"{'top-3 (95% CI)':>20s}")
     for (config, name), s in table.items():
         cells = [f"{s[k]:4.0%} ({s[k + '_ci95'][0]:3.0%}-{s[k + '_ci95'][1]:4.0%})"
                  for k in ("top1", "top3")]
-        print(f"{config:44s} {name:60s} {s['n']:3d}  {cells[0]:>20s}  {cells[1]:>20s}")
-    cpu = cpu_per_query(configs, sets)
+        print(f"{config:58s} {name:60s} {s['n']:3d}  {cells[0]:>20s}  {cells[1]:>20s}")
+    cpu = cpu_per_query({c: r for c, (r, _) in configs.items()}, sets)
     print("\nin-process CPU time per recommendation (all the sets' phrases, configurations "
           f"interleaved, load average {os.getloadavg()[0]:.1f}):")
     for config, figures in cpu.items():
@@ -253,14 +298,17 @@ def shipped(args) -> int:
         print(f"\n{config}, {name}: {len(misses)} top-1 misses")
         for row in misses:
             print(f"  {row['phrase']!r}: expected {row['expected']}, got {row['top3']}")
-    path = write_json("nlp_region_accuracy_shipped", {
+    stem = "nlp_region_accuracy_shipped" + ("_word2vec" if args.skip_sentence else "")
+    path = write_json(stem, {
         "table": [dict(config=c, set=n, **s) for (c, n), s in table.items()],
         "queries": [dict(config=c, set=n, **r) for (c, n), q in rows.items() for r in q],
-        "word2vec": {k: info[k] for k in ("corpora", "path", "cache_hit")}, "cpu_per_query": cpu,
-        "sentence": sentence.description, "load_average": os.getloadavg()})
+        "word2vec": {c: {k: info[k] for k in ("corpora", "path", "cache_hit")}
+                     for c, info in infos.items()}, "cpu_per_query": cpu,
+        "sentence": sentence.description if sentence else None,
+        "load_average": os.getloadavg()})
     plot_shipped({k: v for k, v in table.items() if k[1].startswith("held-out")},
-                 OUT_DIR / "nlp_region_accuracy_shipped.png")
-    print(f"\nwrote {path} and {OUT_DIR / 'nlp_region_accuracy_shipped.png'}")
+                 OUT_DIR / f"{stem}.png")
+    print(f"\nwrote {path} and {OUT_DIR / (stem + '.png')}")
     return 0
 
 
@@ -284,6 +332,82 @@ def cpu_per_query(configs, sets) -> dict:
     return {config: {"p50_ms": 1e3 * float(np.percentile(values, 50)),
                      "p99_ms": 1e3 * float(np.percentile(values, 99)), "n": len(values)}
             for config, values in times.items()}
+
+
+# The settings of issue 18's first round (kept for the comparison rows).
+ROUND1_SENTENCE = {"name_text_weight": 0.3, "name_spelling_weight": 0.2, "number_weight": 0.2}
+
+
+def round1_word() -> dict:
+    return {"name_text_weight": 0.5, "weights": ExpansionWeights(
+        name=1.0, synonym=0.9, derived=0.8, definition=0.6, senses=2)}
+
+
+def dev_round2(args) -> int:
+    """Issue 18, second round: label descriptions, spoken numbers and the weights, chosen on the
+    dev sets only (region_eval_real.yaml, region_eval.yaml, region_test_real.yaml); the new
+    held-out region_test_real_2.yaml is not read here. Best pooled dev top-1 (ties: top-3)."""
+    wordnet = WordNet()
+    sets = load_dev_sets()
+    sentence = load_sentence_model()
+    candidates = []  # (family, settings text, recommender, use descriptions)
+    candidates.append(("sentence", "round 1", PhraseRegionRecommender(
+        sentence.embed_phrases, wordnet=wordnet, number_words=False, **ROUND1_SENTENCE), False))
+    candidates.append(("sentence", "round 1 + number words", PhraseRegionRecommender(
+        sentence.embed_phrases, wordnet=wordnet, **ROUND1_SENTENCE), False))
+    for text_weight in (0.0, 0.3, 0.5, 0.7):
+        for spelling_weight in (0.1, 0.2, 0.3):
+            for expand in (True, False):
+                weights = ExpansionWeights(expand_description=expand)
+                candidates.append((
+                    "sentence", f"numbers + descriptions (expand {expand}), name_text "
+                    f"{text_weight}, name_spelling {spelling_weight}",
+                    PhraseRegionRecommender(sentence.embed_phrases, wordnet=wordnet,
+                                            weights=weights, name_text_weight=text_weight,
+                                            name_spelling_weight=spelling_weight), True))
+    corpora = (["wordnet"] if args.quick else
+               [c for c in args.sources.split(",") if c])
+    for source in corpora:
+        embeddings, _ = load_embeddings(source, brown_path=args.brown if "brown" in source else "",
+                                        params=Word2VecParams(), cache_dir=args.cache_dir or None,
+                                        progress=True)
+        family = f"word2vec {source}"
+        embed = embeddings.embed_words
+        candidates.append((family, "round 1", RegionRecommender(
+            embed, wordnet=wordnet, hubness=True, number_words=False, **round1_word()), False))
+        candidates.append((family, "round 1 + number words", RegionRecommender(
+            embed, wordnet=wordnet, hubness=True, **round1_word()), False))
+        for text_weight in (0.3, 0.5, 0.7):
+            for expand in (True, False):
+                for described in (0.8, 1.0):
+                    weights = ExpansionWeights(expand_description=expand, description=described)
+                    candidates.append((
+                        family, f"numbers + descriptions (expand {expand}, weight {described}), "
+                        f"name_text {text_weight}", RegionRecommender(
+                            embed, wordnet=wordnet, hubness=True, weights=weights,
+                            name_text_weight=text_weight), True))
+    results = []
+    for family, settings, recommender, described in candidates:
+        ranker = recommender_ranker(recommender, descriptions=described)
+        per_set = {name: evaluate(ranker, buildings)["queries"] for name, buildings in sets.items()}
+        pooled = summarize([r for rows in per_set.values() for r in rows])
+        results.append({"family": family, "settings": settings, "pooled": pooled,
+                        "sets": {name: summarize(rows) for name, rows in per_set.items()},
+                        "misses": [r for rows in per_set.values() for r in rows
+                                   if not r["top1_ok"]]})
+        cells = "  ".join(f"{summarize(rows)['top1']:4.0%}/{summarize(rows)['top3']:4.0%}"
+                          for rows in per_set.values())
+        print(f"{family:22s} {settings:78s} {cells}  pooled {pooled['top1']:.1%} / "
+              f"{pooled['top3']:.1%}", flush=True)
+    print("\nsets: " + " | ".join(sets))
+    for family in dict.fromkeys(r["family"] for r in results):
+        ranked = sorted((r for r in results if r["family"] == family),
+                        key=lambda r: (-r["pooled"]["top1"], -r["pooled"]["top3"]))
+        print(f"best for {family}: {ranked[0]['settings']} (dev top-1 "
+              f"{ranked[0]['pooled']['top1']:.1%}, top-3 {ranked[0]['pooled']['top3']:.1%})")
+    path = write_json("nlp_region_accuracy_dev_round2", {"sets": list(sets), "results": results})
+    print(f"\nwrote {path}")
+    return 0
 
 
 # The grids of issue 18's settings (chosen on the dev sets only).

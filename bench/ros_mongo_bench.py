@@ -9,9 +9,11 @@
    publishing: totals, per MB published, as multiples of rosbag record's (targets: recorder +
    server <= 3x, recorder <= 1.5x); peak RSS (VmHWM) of each. `--only-record` runs just this stage.
 2. import: that bag into each database (ros_mongo_bag's import) against the same server's raw
-   bulk-insert rate for the same payloads (msgs/s, MB/s, ratio; target >= 0.5).
+   bulk-insert rate for the same payloads (msgs/s, MB/s, ratio; target >= 0.9). `--bag FILE
+   --only-import` runs just this stage on a bag kept by an earlier run (`--keep`).
 3. replay: ros_mongo_retriever against `rosbag play` of the same data: p50/p99 of the inter-message
    gap error |received gap - recorded gap| per message pair (target: no worse than rosbag play).
+   `--bag FILE --only-replay` imports the bag into the first backend and runs just this stage.
 4. fault run (CouchDB through ros_harness.fault_proxy, a real proxy process in front of the real
    server): the same load while the proxy answers 30 s of 401 (wrong password), then 30 s of 500
    timeout, then recovers: messages lost (target 0), seconds from recovery until the spool is
@@ -204,11 +206,25 @@ def _rates(stored, published, seconds):
             "drops_total": sum(published[t] - stored.get(t, 0) for t in published)}
 
 
-def bench_import(bag, urls):
+def bench_import(bag, urls, raw_rate=True):
+    """The bag imported into each database and, unless not `raw_rate`, the same server's raw
+    bulk-insert rate for the same payloads (measured after the import, on a fresh database)."""
+    if raw_rate:  # the import as the ros_mongo_bag command line runs it (not for --only-replay, so
+        # the replay's measuring subscriber is the same in runs of versions with and without it)
+        try:
+            from ros_mongo.allocator import keep_freed_memory
+            keep_freed_memory()
+        except ImportError:  # a ros_mongo without it (comparing with an earlier version)
+            pass
     results = {}
     for backend, url in urls.items():
         with open_store(url + "_import") as store:
             imported = import_bag(bag, store, session_id="import", progress=True)
+        if not raw_rate:
+            results[backend] = {"import_msgs_per_s": imported.rate, "messages": imported.messages,
+                                "import_mb_per_s": imported.megabytes_per_second,
+                                "megabytes": imported.bytes / 1e6}
+            continue
         raw = raw_bulk_rate(bag, url + "_raw")
         results[backend] = {"import_msgs_per_s": imported.rate,
                             "import_mb_per_s": imported.megabytes_per_second,
@@ -283,6 +299,10 @@ def report(results):
             say(f"    {who:24s} {figures['seconds'][key]:6.2f} s = {per_mb:6.2f} ms/MB "
                 f"= {figures['x_rosbag_record'][key]:5.2f} x" + (f", peak RSS {rss:.0f} MB" if rss else ""))
     for backend, imp in results.get("import", {}).items():
+        if "raw_msgs_per_s" not in imp:
+            say(f"import ({backend}, {imp['messages']} msgs, {imp['megabytes']:.0f} MB): "
+                f"{imp['import_msgs_per_s']:.0f} msgs/s, {imp['import_mb_per_s']:.1f} MB/s (for the replay)")
+            continue
         say(f"import ({backend}, {imp['messages']} msgs, {imp['megabytes']:.0f} MB): "
             f"{imp['import_msgs_per_s']:.0f} msgs/s, {imp['import_mb_per_s']:.1f} MB/s; raw bulk insert "
             f"{imp['raw_msgs_per_s']:.0f} msgs/s, {imp['raw_mb_per_s']:.1f} MB/s; ratio "
@@ -325,12 +345,21 @@ def main(argv=None):
     parser.add_argument("--only-fault", action="store_true", help="run only the fault run")
     parser.add_argument("--only-record", action="store_true", help="run only the record stage (with its "
                         "CPU figures)")
+    parser.add_argument("--only-import", action="store_true", help="with --bag: run only the import "
+                        "stage (import and raw bulk rate, each backend)")
+    parser.add_argument("--only-replay", action="store_true", help="with --bag: import it into the first "
+                        "backend (no raw bulk rate), then run only the replay stage")
     args = parser.parse_args(argv)
+    if (args.only_import or args.only_replay) and args.bag is None:
+        parser.error("--only-import and --only-replay need --bag (a bag kept by an earlier run with --keep, "
+                     "e.g. artifacts/bench/ros_mongo_work/record_couchdb.bag)")
     duration = args.duration or (4.0 if args.quick else 20.0)
     backends = args.backends or (["couchdb"] if args.quick else list(BACKENDS))
     fault_seconds = args.fault_seconds or (5.0 if args.quick else 30.0)
     if args.only_fault:
         backends = ["couchdb"]
+    if args.only_replay:
+        backends = backends[:1]
     args.output.mkdir(parents=True, exist_ok=True)
     work = args.output / "ros_mongo_work"
     if args.bag is not None:
@@ -360,7 +389,11 @@ def main(argv=None):
             return _finish(args, results, work, load, servers, core, name="ros_mongo_record.json")
         bag = args.bag or Path(results["record"][backends[0]]["bag"])
         say("import ...")
-        results["import"] = bench_import(bag, {b: servers[b].database_url("bench") for b in backends})
+        targets = backends[:1] if args.only_replay else backends
+        results["import"] = bench_import(bag, {b: servers[b].database_url("bench") for b in targets},
+                                         raw_rate=not args.only_replay)
+        if args.only_import:
+            return _finish(args, results, work, load, servers, core, name="ros_mongo_import.json")
         say("replay ...")
         extra = {k: yaml.safe_load(v) for k, v in (p.split("=", 1) for p in args.retriever_param)}
         results["replay"] = bench_replay(core, bag, servers[backends[0]].database_url("bench"), work, extra,

@@ -30,6 +30,24 @@ def test_linear_likelihood_gradient_matches_finite_differences(expert_demos, tru
     assert d_beta == pytest.approx(numeric_beta, rel=1e-5)
 
 
+def test_noisy_likelihood_gradient_matches_finite_differences(expert_demos, true_weights):
+    terms = [feature_terms(dyn, LinearCIOC().features) for dyn in prepare(expert_demos[:2])]
+    weights, beta, noise = true_weights * 3.0, 0.5, np.array([0.01, 0.04])
+    value, grad, d_beta = LinearCIOC.log_likelihood(terms, weights, beta, noise=noise)
+    params = np.concatenate([weights, noise])
+    eps = 1e-6
+
+    def value_at(p, b=beta):
+        return LinearCIOC.log_likelihood(terms, p[:-2], b, False, noise=p[-2:])[0]
+    for k in range(len(params)):
+        step = np.zeros_like(params)
+        step[k] = eps
+        numeric = (value_at(params + step) - value_at(params - step)) / (2 * eps)
+        assert grad[k] == pytest.approx(numeric, rel=1e-5, abs=1e-5)
+    numeric_beta = (value_at(params, beta + eps) - value_at(params, beta - eps)) / (2 * eps)
+    assert d_beta == pytest.approx(numeric_beta, rel=1e-5)
+
+
 def test_linear_cioc_recovers_the_known_reward_direction(expert_demos, true_weights):
     model = LinearCIOC(random_state=0).fit(expert_demos)
     assert _cosine(model.weights_, true_weights) > 0.98

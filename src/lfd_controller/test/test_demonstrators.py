@@ -63,7 +63,8 @@ def test_dart_drives_keep_the_persons_commands_and_the_perturbed_states(static_s
 
 def test_person_features_round_trip_through_reward_files():
     features = person_features()
-    assert features.names[-1] == "forward_command" and "goal_slowing" in features.state_names
+    assert {"goal_progress", "obstacle_predicted", "speed_squared"} <= set(features.state_names)
+    assert features.get_params()["proximity_widths"] == [0.5, 0.8]
     reward = LinearReward(np.arange(len(features.names)) - 3.0, features)
     again = reward_from_dict(reward.to_dict())
     assert again.features.names == features.names and again.weights.tolist() == reward.weights.tolist()

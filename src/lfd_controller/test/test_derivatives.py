@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from lfd_controller.features import FeatureSet, Task
-from lfd_controller.laplace import DemoDynamics, laplace_log_likelihood
+from lfd_controller.laplace import DemoDynamics, laplace_log_likelihood, noisy_laplace_log_likelihood
 from lfd_controller.planner import trajectory_reward
 from lfd_controller.rewards import GPReward, LinearReward, RewardDerivatives
 from robot_sim.scenarios import load_scenario
@@ -23,7 +23,10 @@ def _random_trajectory(seed, count=12):
 @pytest.mark.parametrize("seed", range(3))
 def test_feature_gradients_and_hessians_match_finite_differences(seed, person):
     rng = np.random.default_rng(seed)
-    features = FeatureSet(forward_command=person, obstacle_facing=person, goal_slowing=person)
+    features = FeatureSet(forward_command=person, obstacle_facing=person, goal_slowing=person,
+                          goal_progress=person, proximity_widths=(0.5, 0.8) if person else (),
+                          predicted=1.0 if person else 0.0, goal_distance=not person,
+                          state_effort=person)
     task = Task.from_scenario(load_scenario("moving_obstacle"))
     states = np.column_stack([rng.uniform(-2.5, 0.5, 6), rng.uniform(-1.2, 1.2, 6),
                               rng.uniform(-3, 3, 6), rng.uniform(-0.5, 0.5, 6), rng.uniform(-1, 1, 6)])
@@ -45,6 +48,26 @@ def test_feature_gradients_and_hessians_match_finite_differences(seed, person):
         down = features.evaluate(states, actions - step, times, task)
         numeric = (up.control - down.control) / (2 * eps)
         np.testing.assert_allclose(fv.control_jac[:, :, i], numeric, atol=1e-7)
+    # the first-order evaluation (planning) gives the same values and gradients
+    first = features.evaluate(states, actions, times, task, order=1)
+    assert first.state_hess is None
+    np.testing.assert_allclose(first.state, fv.state)
+    np.testing.assert_allclose(first.state_jac, fv.state_jac)
+
+
+def test_progress_is_speed_toward_the_goal_and_prediction_looks_ahead():
+    """Values against hand computation: goal_progress = v cos(bearing) far from the goal;
+    obstacle_predicted peaks where robot and obstacle will meet `predicted` s ahead."""
+    features = FeatureSet(goal_distance=False, goal_progress=True, predicted=1.0)
+    # goal (0, 0); obstacle (-1.3, -1.2 + 0.25 t)
+    task = Task.from_scenario(load_scenario("moving_obstacle"))
+    states = np.array([[-30.0, 0.0, 0.0, 0.4, 0.0],      # heading straight at the goal
+                       [-30.0, 0.0, np.pi / 3, 0.4, 0.0],   # 60 degrees off
+                       [-1.3, -0.7, 0.0, 0.0, 0.0]])      # standing where the obstacle is at t = 2 s
+    fv = features.evaluate(states, np.zeros((3, 2)), np.array([0.0, 0.0, 1.0]), task)
+    progress = fv.state[:, features.state_names.index("goal_progress")]
+    assert progress[0] == pytest.approx(0.4, rel=1e-3) and progress[1] == pytest.approx(0.2, rel=1e-3)
+    assert fv.state[2, features.state_names.index("obstacle_predicted")] == pytest.approx(1.0)
 
 
 def _rewards():
@@ -137,6 +160,37 @@ def test_laplace_likelihood_of_a_gaussian_is_its_log_density():
     expected = -0.5 * mean @ np.linalg.solve(cov, mean) - 0.5 * np.log(np.linalg.det(2 * np.pi * cov))
     assert laplace_log_likelihood(g, hess).value == pytest.approx(expected, rel=1e-10)
     assert laplace_log_likelihood(g, -hess) is None       # not negative definite
+
+
+def test_noisy_laplace_likelihood_is_the_gaussian_density_and_its_gradients_are_exact():
+    """With action noise S: L = log N(0; -H^-1 g, -H^-1 + S) (exact for a quadratic reward), equal
+    to the plain Laplace L for S -> 0; dL/dg, dL/dH, dL/dS against finite differences."""
+    rng = np.random.default_rng(3)
+    root = rng.standard_normal((4, 4))
+    hess = -(root @ root.T + 2 * np.eye(4))
+    g, noise = rng.standard_normal(4), rng.uniform(0.1, 0.5, 4)
+    cov = -np.linalg.inv(hess) + np.diag(noise)
+    mean = -np.linalg.inv(hess) @ g
+    expected = -0.5 * mean @ np.linalg.solve(cov, mean) - 0.5 * np.log(np.linalg.det(2 * np.pi * cov))
+    terms = noisy_laplace_log_likelihood(g, hess, noise)
+    assert terms.value == pytest.approx(expected, rel=1e-10)
+    assert noisy_laplace_log_likelihood(g, hess, np.zeros(4)).value == pytest.approx(
+        laplace_log_likelihood(g, hess).value, rel=1e-10)
+    eps = 1e-6
+    for i in range(4):
+        step = np.zeros(4)
+        step[i] = eps
+        numeric = (noisy_laplace_log_likelihood(g + step, hess, noise, derivatives=False).value
+                   - noisy_laplace_log_likelihood(g - step, hess, noise, derivatives=False).value)
+        assert terms.h_vec[i] == pytest.approx(numeric / (2 * eps), rel=1e-5)
+        numeric = (noisy_laplace_log_likelihood(g, hess, noise + step, derivatives=False).value
+                   - noisy_laplace_log_likelihood(g, hess, noise - step, derivatives=False).value)
+        assert terms.noise_grad[i] == pytest.approx(numeric / (2 * eps), rel=1e-5)
+    direction = rng.standard_normal((4, 4))
+    direction = direction + direction.T
+    numeric = (noisy_laplace_log_likelihood(g, hess + eps * direction, noise, derivatives=False).value
+               - noisy_laplace_log_likelihood(g, hess - eps * direction, noise, derivatives=False).value)
+    assert np.sum(terms.m_mat * direction) == pytest.approx(numeric / (2 * eps), rel=1e-5)
 
 
 def test_gp_feature_derivatives_match_finite_differences():

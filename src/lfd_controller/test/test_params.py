@@ -4,7 +4,9 @@ from pathlib import Path
 
 import pytest
 
+from lfd_controller.demonstrators import person_demos
 from lfd_controller.errors import LfdError
+from lfd_controller.learning import controller_settings, learn_and_save
 from lfd_controller.params import (
     DemoRecorderConfig,
     JoyTeleopConfig,
@@ -34,7 +36,7 @@ def test_controller_config_builds_the_limits_and_the_planner_options():
     config = RewardControllerConfig.from_mapping({"reward_file": "r.yaml", "v_max": 1})
     assert config.limits() == UnicycleLimits(v_max=1.0)
     assert config.controller_options() == {"horizon": 20, "plan_dt": 0.2, "terminal": 10.0,
-                                           "max_iter": 15}
+                                           "max_iter": 15, "detour": 0.0}
     with pytest.raises(ConfigError, match="rate"):
         RewardControllerConfig.from_mapping({"rate": 0.0})
     with pytest.raises(ModelError, match="w_max"):
@@ -63,3 +65,24 @@ def test_learn_reward_command_line_takes_the_class_defaults():
         learn_reward_parser().parse_args([])          # --output is required
     with pytest.raises(ConfigError, match="output"):
         LearnRewardConfig.from_mapping({})
+
+
+def test_a_person_reward_carries_the_controller_settings_it_is_driven_with(tmp_path, static_scenario):
+    demos = person_demos(static_scenario, "steady", static_scenario.sample_starts(3, seed=31), seed=5)
+    person, linear = tmp_path / "person.yaml", tmp_path / "linear.yaml"
+    learn_and_save(demos, kind="person", output=str(person))
+    learn_and_save(demos, kind="linear", output=str(linear))
+    config = RewardControllerConfig.from_mapping({"reward_file": str(person)})
+    driven = config.with_reward_settings(controller_settings(person))
+    # the person driving settings documented in src/lfd_controller/README.md
+    assert (driven.horizon, driven.plan_dt, driven.terminal, driven.detour, driven.collision_margin) == (
+        20, 0.4, 0.0, 0.8, 0.1)
+    assert driven.rate == config.rate and driven.max_iter == config.max_iter
+    assert controller_settings(linear) == {}
+    assert config.with_reward_settings(controller_settings(linear)) == config
+    kept = RewardControllerConfig.from_mapping({"reward_file": str(person), "reward_settings": False})
+    assert kept.with_reward_settings(controller_settings(person)) == kept
+    with pytest.raises(ConfigError, match="rate"):
+        config.with_reward_settings({"rate": 50.0})
+    with pytest.raises(ConfigError, match="detour"):
+        config.with_reward_settings({"detour": -1.0})

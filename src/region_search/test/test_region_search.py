@@ -244,3 +244,26 @@ def test_a_missing_sentence_model_falls_back_to_word2vec_or_stops_with_a_clear_e
             "no sentence-transformers model") in log
     assert "exit code 1" in log
     assert not rospy_node.has_param("/strict_embedding_server/active_backend")
+
+
+def test_label_descriptions_from_the_label_file_and_a_descriptions_file(roslaunch, rospy_node,
+                                                                         files):
+    """Names that say nothing ("place_a"); what each place is comes from its description: a
+    label file's "description" field, and ~descriptions_path (its entries win), re-read when it
+    changes (issue 18)."""
+    labels = files / "opaque_labels.json"
+    labels.write_text('{"place_a": {"x": 1, "y": 1, "description": "the printer room"},'
+                      ' "place_b": {"x": 2, "y": 2}, "place_c": {"x": 3, "y": 3}}')
+    descriptions = files / "descriptions.yaml"
+    descriptions.write_text("place_b: the kitchen\nplace_c: a lounge for a nap\n")
+    start_region_search(roslaunch, rospy_node, files, labels_path=str(labels),
+                        descriptions_path=str(descriptions), layer_service="")
+    recommend = rospy_node.ServiceProxy("/region_recommender/recommend", RecommendRegion)
+    for phrase, best in [("print a poster", "place_a"), ("coffee", "place_b"),
+                         ("take a nap", "place_c")]:
+        response = recommend(phrase=phrase, top_k=3)
+        assert response.success, response.message
+        assert list(response.labels)[0] == best, (phrase, response)
+    descriptions.write_text("place_b: a lounge for a nap\nplace_c: the kitchen\n")
+    wait_until(lambda: recommend(phrase="coffee", top_k=1).labels[0] == "place_c", 30,
+               what="the changed descriptions file to be used")

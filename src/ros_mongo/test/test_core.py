@@ -20,10 +20,11 @@ from ros_mongo import (
     open_store,
     parse_query,
 )
+from ros_mongo.allocator import keep_freed_memory
 from ros_mongo.documents import query_conditions, to_selector
 from ros_mongo.msgtypes import message_class, to_fields
 from ros_mongo.recorder import Recorder
-from ros_mongo.records import split_time
+from ros_mongo.records import new_message_id, split_time
 from ros_mongo.replay import Replayer
 from ros_mongo.ros_recorder import RecorderConfig
 from ros_mongo.ros_retriever import RetrieverConfig, configured_query
@@ -145,6 +146,20 @@ def test_recorder_spools_what_the_queue_cannot_hold_and_stores_it_decoded(couchd
     assert {tuple(m.tags) for m in stored} == {("talk",)} and {m.session_id for m in stored} == {"s"}
 
 
+def test_message_ids_are_distinct_and_keep_their_form():
+    ids = [new_message_id(1700000000, 5, "robot 1") for _ in range(1000)]
+    assert len(set(ids)) == 1000
+    for doc_id in ids:
+        stamp, robot, token = doc_id.split("-")
+        assert stamp == "1700000000000000005" and robot == "robot%201"
+        assert len(token) == 12 and set(token) <= set("0123456789abcdef")
+    assert new_message_id(1, 0, token="abc") == "0000000001000000000-abc"
+
+
+def test_allocator_tuning_applies_on_glibc():
+    assert keep_freed_memory() is True  # Debian's C library is glibc
+
+
 # -- the replayer ----------------------------------------------------------------------------
 @pytest.fixture
 def replay_store(couchdb_url):
@@ -174,6 +189,26 @@ def test_replay_fixed_rate_loop_and_stop(replay_store):
     assert replayer.stop() and replayer.state == "stopped"
     assert [m.receive_time for m in got[:40]] == [100.0 + i % 20 for i in range(40)]
     assert clock and all(isinstance(c, genpy.Time) for c in clock)
+
+
+@pytest.mark.db
+def test_replay_prepares_each_message_before_publishing_it(replay_store):
+    prepared, got = [], []
+
+    def prepare(item):
+        prepared.append(item.receive_time)
+        item.prepared = b"ready:" + bytes(item.raw)
+
+    def publish(item):
+        got.append((item.receive_time, len(prepared), item.prepared, bytes(item.raw)))
+
+    replayer = Replayer(replay_store, publish, prepare=prepare, rate=100.0)
+    replayer.start(parse_query("topic /chatter"))
+    assert replayer.wait(60) and replayer.state == "finished"
+    assert prepared == [100.0 + i for i in range(20)]
+    for index, (stamp, prepared_so_far, ready, raw) in enumerate(got):
+        assert stamp == 100.0 + index and prepared_so_far > index  # prepared before its turn
+        assert raw == serialized(String(data=f"m{index}")) and ready == b"ready:" + raw
 
 
 @pytest.mark.db

@@ -22,12 +22,15 @@ from std_srvs.srv import Trigger
 from ros_harness import LaunchSet, ManagedProcess, PouchDBServer, RosCore, wait_until
 from ros_mongo import open_store
 from ros_mongo.replication import (
+    POUCHDB_BATCH_SIZE,
     CouchDatabase,
     PushReplication,
     ReplicationError,
     ReplicationSpec,
 )
 from ros_mongo.retention import Retention
+
+FIRST = 3 * POUCHDB_BATCH_SIZE  # messages replicated before central stops
 
 HERE = Path(__file__).resolve().parent
 LONG = 300.0  # seconds: generous, the machine is busy
@@ -174,11 +177,12 @@ def test_central_restart_resumes_replication_from_its_checkpoint(tmp_path):
             local_url, central_url = robot.database_url("robot_data"), central.database_url("fleet")
             assert requests.put(central_url, timeout=30).status_code == 201
             with open_store(local_url) as store:
-                record_odometry(store, robot_id, 0, 450)
+                record_odometry(store, robot_id, 0, FIRST)
                 local = CouchDatabase(local_url)
                 replication = PushReplication.for_robot(local, CouchDatabase(central_url), robot_id)
                 replication.start()
-                wait_until(lambda: count_messages(central_url) == 450, LONG, what="450 messages central")
+                wait_until(lambda: count_messages(central_url) == FIRST, LONG,
+                           what=f"{FIRST} messages central")
                 # the checkpoint the store's replicator keeps on central (its id from central's log)
                 log = server_log_since_start(central)
                 checkpoint_ids = set(re.findall(r"PUT /fleet/_local/(\S+) 201", log))
@@ -188,27 +192,30 @@ def test_central_restart_resumes_replication_from_its_checkpoint(tmp_path):
                 def checkpoint_seq():
                     return requests.get(checkpoint_url, timeout=30).json()["last_seq"]
 
-                wait_until(lambda: checkpoint_seq() >= 450, LONG, what="a checkpoint after 450")
+                wait_until(lambda: checkpoint_seq() >= FIRST, LONG, what=f"a checkpoint after {FIRST}")
                 before = checkpoint_seq()
                 first_run_diffs = log.count("POST /fleet/_revs_diff")
-                assert first_run_diffs >= 4  # 450 changes in batches of 100: a replay is visible
+                # FIRST changes in batches of POUCHDB_BATCH_SIZE: a replay from zero is visible
+                assert first_run_diffs >= 3
 
                 central.stop()
-                record_odometry(store, robot_id, 450, 60)  # recording goes on, central is down
-                assert count_messages(local_url) == 510
+                record_odometry(store, robot_id, FIRST, 60)  # recording goes on, central is down
+                assert count_messages(local_url) == FIRST + 60
                 central.start()
                 replication.trigger()  # what the replicator node does when central is back
-                wait_until(lambda: count_messages(central_url) == 510, LONG, what="510 messages central")
+                wait_until(lambda: count_messages(central_url) == FIRST + 60, LONG,
+                           what="every message central")
                 wait_until(lambda: checkpoint_seq() > before, LONG, what="the checkpoint moving on")
 
                 log = server_log_since_start(central)
                 # the restarted replication read its checkpoint and sent only what came after it:
-                # a replay from zero compares all 510 changes again (at least as many _revs_diff
+                # a replay from zero compares all FIRST + 60 changes again (at least as many _revs_diff
                 # requests as the first run)
                 assert re.search(r"GET /fleet/_local/\S+ 200", log), log[-2000:]
                 assert log.count("POST /fleet/_revs_diff") < first_run_diffs, log[-3000:]
                 assert same_documents(local_url, central_url)
-                assert sorted(content(d)[2] for d in messages(all_docs(central_url))) == list(range(510))
+                stored = sorted(content(d)[2] for d in messages(all_docs(central_url)))
+                assert stored == list(range(FIRST + 60))
                 replication.stop()
         finally:
             central.stop()
@@ -216,40 +223,53 @@ def test_central_restart_resumes_replication_from_its_checkpoint(tmp_path):
 
 @pytest.mark.db
 def test_robot_store_restart_mid_replication_loses_nothing(tmp_path):
+    """The robot's store restarts while its replication is under way: 100 images are central,
+    100 more wait to be sent. Central is stopped meanwhile, so "mid-replication" is a state the
+    test sets, not a race with the replicator it hopes to win."""
     robot_id = "robot_b"
     pixels = bytes(i % 251 for i in range(640 * 480))
-    with PouchDBServer(tmp_path / "central") as central:
-        robot = PouchDBServer(tmp_path / "robot").start()
-        try:
-            local_url, central_url = robot.database_url("robot_data"), central.database_url("fleet")
-            assert requests.put(central_url, timeout=30).status_code == 201
-            with open_store(local_url) as store:
-                for index in range(200):  # 307 KB each (attachments): replication takes a while
-                    image = Image(height=480, width=640, encoding="mono8", step=640, data=pixels)
-                    image.header.frame_id = str(index)
-                    store.insert_message("/camera/rgb/image_raw", image, robot_id=robot_id)
-            local = CouchDatabase(local_url)
-            replication = PushReplication.for_robot(local, CouchDatabase(central_url), robot_id)
-            replication.start()
-            wait_until(lambda: count_messages(central_url) >= 10, LONG, what="replication under way")
-            assert count_messages(central_url) < 200  # mid-replication
-            robot.restart()  # the store (and its replicator) stops mid-stream and comes back
-            with open_store(local_url) as store:
-                record_odometry(store, robot_id, 0, 30)  # recording after the restart
-            # the replication document persists: the store's replicator resumes it by itself
-            wait_until(lambda: count_messages(central_url) == 230, LONG, what="230 messages central")
-            assert same_documents(local_url, central_url)
-            central_docs = all_docs(central_url)
-            assert [d["_id"] for d in central_docs if d.get("_conflicts")] == []
-            found = sorted((d["topic"], content(d)[2]) for d in messages(central_docs))
-            assert found == sorted([("/camera/rgb/image_raw", i) for i in range(200)]
-                                   + [("/odom", i) for i in range(30)])
-            image = next(d for d in messages(central_docs) if d["topic"] == "/camera/rgb/image_raw")
-            raw = requests.get(f"{central_url}/{unquote(image['_id'])}/raw", timeout=30)
-            assert raw.status_code == 200 and len(raw.content) == image["size"]
-            replication.stop()
-        finally:
-            robot.stop()
+
+    def record_images(store, first, count):  # 307 KB each: attachments
+        for index in range(first, first + count):
+            image = Image(height=480, width=640, encoding="mono8", step=640, data=pixels)
+            image.header.frame_id = str(index)
+            store.insert_message("/camera/rgb/image_raw", image, robot_id=robot_id)
+
+    central = PouchDBServer(tmp_path / "central").start()
+    robot = PouchDBServer(tmp_path / "robot").start()
+    try:
+        local_url, central_url = robot.database_url("robot_data"), central.database_url("fleet")
+        assert requests.put(central_url, timeout=30).status_code == 201
+        with open_store(local_url) as store:
+            record_images(store, 0, 100)
+        local = CouchDatabase(local_url)
+        replication = PushReplication.for_robot(local, CouchDatabase(central_url), robot_id)
+        replication.start()
+        wait_until(lambda: count_messages(central_url) == 100, LONG, what="the first 100 images central")
+        central.stop()
+        with open_store(local_url) as store:
+            record_images(store, 100, 100)  # pending: the replicator cannot send them
+        robot.restart()  # the store (and its replicator) stops mid-replication and comes back
+        with open_store(local_url) as store:
+            record_odometry(store, robot_id, 0, 30)  # recording after the restart
+        central.start()
+        # the replication document persisted: the restarted store's replicator resumes it; the
+        # trigger is what the replicator node does when central answers again
+        replication.trigger()
+        wait_until(lambda: count_messages(central_url) == 230, LONG, what="230 messages central")
+        assert same_documents(local_url, central_url)
+        central_docs = all_docs(central_url)
+        assert [d["_id"] for d in central_docs if d.get("_conflicts")] == []
+        found = sorted((d["topic"], content(d)[2]) for d in messages(central_docs))
+        assert found == sorted([("/camera/rgb/image_raw", i) for i in range(200)]
+                               + [("/odom", i) for i in range(30)])
+        image = next(d for d in messages(central_docs) if d["topic"] == "/camera/rgb/image_raw")
+        raw = requests.get(f"{central_url}/{unquote(image['_id'])}/raw", timeout=30)
+        assert raw.status_code == 200 and len(raw.content) == image["size"]
+        replication.stop()
+    finally:
+        robot.stop()
+        central.stop()
 
 
 # -- one robot: diagnostics and services -------------------------------------------------------

@@ -192,6 +192,27 @@ def test_retriever_offset_loop_fixed_rate_and_clock(roslaunch, couchdb_url, rosp
     collector.close()
 
 
+def test_retriever_latches_what_a_latched_topic_replayed(roslaunch, couchdb_url, rospy_node):
+    """A latched topic's last replayed message reaches a subscriber that comes after the replay."""
+    maps = [image(4, 3), image(8, 6)]
+    with open_store(couchdb_url) as store:
+        store.put_topic(TopicInfo.of_class("/map_image", Image, latching=True))
+        store.insert_records([make_record("/map_image", Image, serialized(m), receive=split_time(500.0 + i))
+                              for i, m in enumerate(maps)])
+    early = Collector(["/map_image_mongo"])
+    roslaunch.node("ros_mongo", "ros_mongo_retriever", name=f"retriever_{uuid.uuid4().hex[:8]}",
+                   params={"db_url": couchdb_url, "query": "topic /map_image", "rate": 10.0,
+                           "start_delay": 3.0})
+    wait_until(lambda: len(early.got["/map_image_mongo"]) == 2, 90, what="the replay")
+    assert [raw for _, raw, _ in early.got["/map_image_mongo"]] == [serialized(m) for m in maps]
+    early.close()
+    late = Collector(["/map_image_mongo"])
+    wait_until(lambda: late.got["/map_image_mongo"], 60, what="the latched message")
+    raw, header = late.got["/map_image_mongo"][0][1:]
+    assert raw == serialized(maps[-1]) and header["latching"] == "1"
+    late.close()
+
+
 def test_original_launch_files_record_and_retrieve_with_a_two_word_query(roslaunch, couchdb_url, tmp_path,
                                                                        diagnostics):
     roslaunch("ros_mongo", "ros_mongo_server.launch", db_url=couchdb_url, session_id="compat",

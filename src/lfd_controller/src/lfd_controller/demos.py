@@ -114,6 +114,33 @@ def smooth_commands(demo: Demonstration, window: int = 5) -> Demonstration:
                          dict(demo.meta, smoothed=window))
 
 
+def windows(demo: Demonstration, length: int, stride: Optional[int] = None) -> List[Demonstration]:
+    """The demonstration cut into pieces of `length` steps every `stride` steps (default: length),
+    each starting from the state recorded there (the model rollout when none was recorded) at its
+    episode time. A person re-decides all the time, as a receding-horizon controller does: each
+    piece is a locally optimal plan from where the person was, not a part of one plan made at the
+    start. A demonstration shorter than `length` stays whole; a last piece shorter than
+    length / 2 is dropped."""
+    if length < 2:
+        raise DemonstrationError(f"window length must be >= 2 steps, got {length!r}")
+    stride = length if stride is None else int(stride)
+    if stride < 1:
+        raise DemonstrationError(f"window stride must be >= 1 step, got {stride!r}")
+    if demo.length <= length:
+        return [demo]
+    trajectory, times = demo.trajectory(), demo.times()
+    pieces = []
+    for first in range(0, demo.length - 1, stride):
+        last = min(demo.length, first + length)
+        if last - first < max(2, length // 2):
+            break
+        states = None if demo.states is None else demo.states[first:last]
+        pieces.append(Demonstration(demo.scenario, trajectory[first], demo.actions[first:last],
+                                    float(times[first]), states, demo.source,
+                                    dict(demo.meta, window=[first, last])))
+    return pieces
+
+
 def demos_summary(demos: List[Demonstration]) -> str:
     lengths = [d.length for d in demos]
     return (f"{len(demos)} demonstrations, {sum(lengths)} steps "

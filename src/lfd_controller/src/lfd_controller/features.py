@@ -27,6 +27,25 @@ FACING_FEATURE = "obstacle_facing"
 # Optional state feature: squared speed near the goal (people brake as they arrive and stop
 # there), v^2 exp(-|goal - p|^2 / (2 goal_slow_scale^2)).
 SLOWING_FEATURE = "goal_slowing"
+# Optional state feature: progress toward the goal per step, v * cos(bearing to the goal) (softened
+# like goal_heading). Summed over a drive it telescopes to (start - end goal distance) / dt: the
+# same pull at any distance, and none once at the goal - a person's "get there", which a summed
+# distance (asking for more speed the farther the goal) is not.
+PROGRESS_FEATURE = "goal_progress"
+# Optional state feature: the obstacle's proximity where robot and obstacle will be `predicted`
+# seconds ahead (robot at its current speed and heading, obstacle along its known motion): a
+# smooth time-to-collision, exp(-|p + tau v (cos, sin) - o(t + tau)|^2 / (2 proximity_scale^2)).
+PREDICTED_FEATURE = "obstacle_predicted"
+# Optional state features: the squared speeds of the robot, v^2 and w^2. With goal_progress (linear
+# in v) they give a preferred speed on the state: at that speed the reward's gradient with respect
+# to v vanishes, so the curvature of the acceleration limit (the second-order dynamics term, which
+# makes a reward linear in v convex in the command where a jittery stick decelerates) drops out.
+STATE_EFFORT_FEATURES = ("speed_squared", "turn_squared")
+
+
+def proximity_name(width: float) -> str:
+    """Name of the extra proximity feature of fall-off length `width` (m)."""
+    return f"obstacle_proximity_{width:g}"
 
 
 @dataclass
@@ -80,6 +99,16 @@ class FeatureSet:
             (default off).
         goal_slowing: add the state feature "goal_slowing" (after those), whose fall-off length
             is goal_slow_scale (m) (default off).
+        goal_distance: keep the state feature "goal_distance" (default on).
+        goal_progress: add the state feature "goal_progress" (v cos(bearing to goal)).
+        proximity_widths: extra obstacle proximities with these fall-off lengths (m), features
+            "obstacle_proximity_<width>" (several widths let the learner shape the clearance
+            people keep).
+        predicted: seconds ahead of the "obstacle_predicted" feature (0: off).
+        state_effort: add the state features "speed_squared" and "turn_squared" (v^2, w^2).
+    Order of the state features: goal_distance, goal_heading, obstacle_proximity, obstacle_ahead,
+    obstacle_facing, goal_slowing, goal_progress, the extra proximities, obstacle_predicted,
+    speed_squared, turn_squared (those switched on).
     """
 
     names: Sequence[str] = FEATURE_NAMES
@@ -89,7 +118,10 @@ class FeatureSet:
     def __init__(self, *, goal_softening: float = 0.2, heading_softening: float = 0.3,
                  proximity_scale: float = 0.35, ahead_scale: float = 0.8,
                  forward_command: bool = False, obstacle_facing: bool = False,
-                 goal_slowing: bool = False, goal_slow_scale: float = 0.5):
+                 goal_slowing: bool = False, goal_slow_scale: float = 0.5,
+                 goal_distance: bool = True, goal_progress: bool = False,
+                 proximity_widths: Sequence[float] = (), predicted: float = 0.0,
+                 state_effort: bool = False):
         for name, value in (("goal_softening", goal_softening), ("heading_softening", heading_softening),
                             ("proximity_scale", proximity_scale), ("ahead_scale", ahead_scale)):
             if not value > 0:
@@ -104,8 +136,21 @@ class FeatureSet:
         if not goal_slow_scale > 0:
             raise LfdError(f"feature parameter goal_slow_scale must be positive, got {goal_slow_scale!r}")
         self.goal_slow_scale = float(goal_slow_scale)
-        self.state_names = STATE_FEATURES + ((FACING_FEATURE,) if self.obstacle_facing else ()) + (
-            (SLOWING_FEATURE,) if self.goal_slowing else ())
+        self.goal_distance = bool(goal_distance)
+        self.goal_progress = bool(goal_progress)
+        self.proximity_widths = tuple(float(w) for w in proximity_widths)
+        self.predicted = float(predicted)
+        self.state_effort = bool(state_effort)
+        if any(not w > 0 for w in self.proximity_widths) or not self.predicted >= 0:
+            raise LfdError(f"proximity widths must be positive and predicted >= 0 s, got "
+                           f"{list(proximity_widths)!r}, {predicted!r}")
+        self.state_names = (STATE_FEATURES[int(not self.goal_distance):]
+                            + ((FACING_FEATURE,) if self.obstacle_facing else ())
+                            + ((SLOWING_FEATURE,) if self.goal_slowing else ())
+                            + ((PROGRESS_FEATURE,) if self.goal_progress else ())
+                            + tuple(proximity_name(w) for w in self.proximity_widths)
+                            + ((PREDICTED_FEATURE,) if self.predicted else ())
+                            + (STATE_EFFORT_FEATURES if self.state_effort else ()))
         self.control_names = CONTROL_FEATURES + ((FORWARD_FEATURE,) if self.forward_command else ())
         self.names = self.state_names + self.control_names
 
@@ -118,34 +163,61 @@ class FeatureSet:
             params["obstacle_facing"] = True
         if self.goal_slowing:
             params.update(goal_slowing=True, goal_slow_scale=self.goal_slow_scale)
+        if not self.goal_distance:
+            params["goal_distance"] = False
+        if self.goal_progress:
+            params["goal_progress"] = True
+        if self.proximity_widths:
+            params["proximity_widths"] = list(self.proximity_widths)
+        if self.predicted:
+            params["predicted"] = self.predicted
+        if self.state_effort:
+            params["state_effort"] = True
         return params
 
-    def _state_jets(self, states: np.ndarray, goal: np.ndarray, obstacles: np.ndarray) -> List[Jet]:
-        variables = Jet.variables(states[:, :self._state_vars])
+    def _state_jets(self, states: np.ndarray, goal: np.ndarray, obstacles: np.ndarray,
+                    predicted_obstacles: Optional[np.ndarray], hessian: bool = True) -> List[Jet]:
+        variables = Jet.variables(states[:, :self._state_vars], hessian)
         px, py, yaw = variables[:3]
         gx, gy = goal[0] - px, goal[1] - py            # radial vector to the goal
         ox, oy = obstacles[:, 0] - px, obstacles[:, 1] - py   # radial vector to the obstacle
         goal_sq = gx.square() + gy.square()
         obst_sq = ox.square() + oy.square()
-        soft = self.goal_softening
-        goal_distance = (goal_sq + soft ** 2).sqrt() - soft
-        heading = (gx * yaw.cos() + gy * yaw.sin()) / (goal_sq + self.heading_softening ** 2).sqrt()
+        cos_yaw, sin_yaw = yaw.cos(), yaw.sin()
+        jets = []
+        if self.goal_distance:
+            soft = self.goal_softening
+            jets.append((goal_sq + soft ** 2).sqrt() - soft)
+        heading = (gx * cos_yaw + gy * sin_yaw) / (goal_sq + self.heading_softening ** 2).sqrt()
         proximity = (obst_sq * (-0.5 / self.proximity_scale ** 2)).exp()
         cos_between = (gx * ox + gy * oy) / ((goal_sq + 0.01) * (obst_sq + 0.01)).sqrt()
         ahead = (obst_sq * (-0.5 / self.ahead_scale ** 2)).exp() * (cos_between + 1.0) * 0.5
-        jets = [goal_distance, heading, proximity, ahead]
+        jets += [heading, proximity, ahead]
         if self.obstacle_facing:
-            facing = (ox * yaw.cos() + oy * yaw.sin()) / (obst_sq + self.heading_softening ** 2).sqrt()
+            facing = (ox * cos_yaw + oy * sin_yaw) / (obst_sq + self.heading_softening ** 2).sqrt()
             jets.append((obst_sq * (-0.5 / self.ahead_scale ** 2)).exp() * (facing + 1.0) * 0.5)
         if self.goal_slowing:
             near_goal = (goal_sq * (-0.5 / self.goal_slow_scale ** 2)).exp()
             jets.append(variables[3].square() * near_goal)
+        if self.goal_progress:
+            jets.append(variables[3] * heading)
+        for width in self.proximity_widths:
+            jets.append((obst_sq * (-0.5 / width ** 2)).exp())
+        if self.predicted:
+            reach = variables[3] * self.predicted
+            fx = predicted_obstacles[:, 0] - px - reach * cos_yaw
+            fy = predicted_obstacles[:, 1] - py - reach * sin_yaw
+            jets.append(((fx.square() + fy.square()) * (-0.5 / self.proximity_scale ** 2)).exp())
+        if self.state_effort:
+            jets += [variables[3].square(), variables[4].square()]
         return jets
 
     @property
     def _state_vars(self) -> int:
         """How many leading state entries the state features depend on (px, py, yaw[, v])."""
-        return 4 if self.goal_slowing else 3
+        if self.state_effort:
+            return 5
+        return 4 if (self.goal_slowing or self.goal_progress or self.predicted) else 3
 
     def evaluate(self, states, actions, times, task: Task, *, order: int = 2) -> FeatureValues:
         """Features of states (T, 5) and actions (T, 2) at episode times (T,)."""
@@ -156,8 +228,12 @@ class FeatureSet:
             raise LfdError(f"states, actions and times differ in length: {len(states)}, "
                            f"{len(actions)}, {len(times)}")
         count = len(states)
+        ahead = None
+        if self.predicted:
+            ahead = np.asarray(task.obstacle_position(times + self.predicted), float).reshape(count, 2)
         jets = self._state_jets(states, np.asarray(task.goal, float),
-                                np.asarray(task.obstacle_position(times), float).reshape(count, 2))
+                                np.asarray(task.obstacle_position(times), float).reshape(count, 2),
+                                ahead, hessian=order >= 2)
         ks = len(jets)
         state_jac = np.zeros((count, ks, 5))
         nv = self._state_vars

@@ -1,7 +1,8 @@
 """Second-order forward-mode automatic differentiation for small batched functions (no ROS).
 
 A Jet carries a batch of values with their gradients and Hessians with respect to n inputs:
-val (B,), grad (B, n), hess (B, n, n). The features use it, so their exact Hessians (which inverse
+val (B,), grad (B, n), hess (B, n, n) - or hess None when only first derivatives are wanted
+(planning), which skips the Hessian arithmetic. The features use it, so their exact Hessians (which inverse
 optimal control needs) come from the same code as their values.
 """
 import numpy as np
@@ -14,31 +15,34 @@ class Jet:
         self.val, self.grad, self.hess = val, grad, hess
 
     @classmethod
-    def variables(cls, values: np.ndarray) -> list:
-        """One Jet per column of values (B, n), each seeded with its unit gradient."""
+    def variables(cls, values: np.ndarray, hessian: bool = True) -> list:
+        """One Jet per column of values (B, n), each seeded with its unit gradient (hessian
+        False: first derivatives only)."""
         values = np.asarray(values, dtype=float)
         batch, n = values.shape
         jets = []
         for i in range(n):
             grad = np.zeros((batch, n))
             grad[:, i] = 1.0
-            jets.append(cls(values[:, i].copy(), grad, np.zeros((batch, n, n))))
+            jets.append(cls(values[:, i].copy(), grad, np.zeros((batch, n, n)) if hessian else None))
         return jets
 
     def _lift(self, other):
         if isinstance(other, Jet):
             return other
         value = np.broadcast_to(np.asarray(other, dtype=float), self.val.shape)
-        return Jet(value, np.zeros_like(self.grad), np.zeros_like(self.hess))
+        return Jet(value, np.zeros_like(self.grad), None if self.hess is None else np.zeros_like(self.hess))
 
     def __add__(self, other):
-        other = self._lift(other)
-        return Jet(self.val + other.val, self.grad + other.grad, self.hess + other.hess)
+        if not isinstance(other, Jet):
+            return Jet(self.val + np.asarray(other, dtype=float), self.grad, self.hess)
+        hess = None if self.hess is None else self.hess + other.hess
+        return Jet(self.val + other.val, self.grad + other.grad, hess)
 
     __radd__ = __add__
 
     def __neg__(self):
-        return Jet(-self.val, -self.grad, -self.hess)
+        return Jet(-self.val, -self.grad, None if self.hess is None else -self.hess)
 
     def __sub__(self, other):
         return self + (-self._lift(other))
@@ -49,11 +53,16 @@ class Jet:
     def __mul__(self, other):
         if not isinstance(other, Jet):
             scale = np.asarray(other, dtype=float)
+            hess = None
+            if self.hess is not None:
+                hess = self.hess * scale[..., None, None] if scale.ndim else self.hess * scale
             return Jet(self.val * scale, self.grad * scale[..., None] if scale.ndim else self.grad * scale,
-                       self.hess * scale[..., None, None] if scale.ndim else self.hess * scale)
+                       hess)
+        grad = self.val[:, None] * other.grad + other.val[:, None] * self.grad
+        if self.hess is None:
+            return Jet(self.val * other.val, grad, None)
         outer = self.grad[:, :, None] * other.grad[:, None, :]
-        return Jet(self.val * other.val,
-                   self.val[:, None] * other.grad + other.val[:, None] * self.grad,
+        return Jet(self.val * other.val, grad,
                    self.val[:, None, None] * other.hess + other.val[:, None, None] * self.hess
                    + outer + np.swapaxes(outer, 1, 2))
 
@@ -68,6 +77,8 @@ class Jet:
         return self.reciprocal() * other
 
     def _unary(self, value, first, second):
+        if self.hess is None:
+            return Jet(value, first[:, None] * self.grad, None)
         outer = self.grad[:, :, None] * self.grad[:, None, :]
         return Jet(value, first[:, None] * self.grad,
                    first[:, None, None] * self.hess + second[:, None, None] * outer)

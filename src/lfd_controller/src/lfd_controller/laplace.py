@@ -61,12 +61,16 @@ class DemoDynamics:
             lam[t] = rx[t] + self.A[t + 1].T @ lam[t + 1]
         return lam
 
-    def grad_hess(self, rd: RewardDerivatives) -> Tuple[np.ndarray, np.ndarray]:
-        """g (n,) and H (n, n) of the trajectory reward with respect to the actions."""
+    def grad_hess(self, rd: RewardDerivatives, second_order: bool = True) -> Tuple[np.ndarray, np.ndarray]:
+        """g (n,) and H (n, n) of the trajectory reward with respect to the actions
+        (second_order False: without the dynamics' second-order term - the Gauss-Newton Hessian
+        of iLQR rather than DDP's)."""
         count, n = self.T, self.n
         lam = self.adjoint(rd.rx)
         g = np.einsum("tai,ta->i", self.Jx, rd.rx) + rd.ru.reshape(-1)
         second = np.einsum("ti,tiab->tab", lam, self.F)       # lambda_t . d2f_t (T, 7, 7)
+        if not second_order:
+            second = np.zeros_like(second)
         q = rd.rxx.copy()
         q[:-1] += second[1:, :5, :5]
         flat = self.Jx.reshape(count * 5, n)
@@ -131,3 +135,47 @@ def laplace_log_likelihood(g: np.ndarray, hess: np.ndarray, *, beta: float = 0.0
     h_vec = -(inv_chol.T @ z)              # H^-1 g
     m_mat = 0.5 * (-neg_inv - np.outer(h_vec, h_vec))
     return LaplaceTerms(float(value), h_vec, m_mat)
+
+
+@dataclass
+class NoisyLaplaceTerms(LaplaceTerms):
+    """LaplaceTerms plus dL/d(noise variances) per action entry (n,)."""
+
+    noise_grad: Optional[np.ndarray] = None
+
+
+def noisy_laplace_log_likelihood(g: np.ndarray, hess: np.ndarray, noise: np.ndarray, *,
+                                 beta: float = 0.0,
+                                 derivatives: bool = True) -> Optional[NoisyLaplaceTerms]:
+    """The Laplace likelihood with action noise: the demonstrated commands are the locally optimal
+    ones plus independent Gaussian noise of variances `noise` (n,) (a quantised stick, a shaking
+    hand), so U_demo ~ N(U*, A^-1 + S), A = -(H - beta I), U* = U_demo + A^-1 g, S = diag(noise):
+
+        L = -1/2 g^T B^-1 g - 1/2 log|B| + log|A| - (n/2) log 2 pi,   B = A + A S A,
+
+    which is L of laplace_log_likelihood for S = 0. Returns dL/dg (h_vec), dL/dH (m_mat) and
+    dL/dnoise; None when H - beta I is not negative definite."""
+    n = len(g)
+    a_mat = -(hess - beta * np.eye(n))
+    try:
+        chol_a = np.linalg.cholesky(a_mat)
+        b_mat = a_mat + (a_mat * noise[None, :]) @ a_mat
+        chol_b = np.linalg.cholesky(b_mat)
+    except np.linalg.LinAlgError:
+        return None
+    z = np.linalg.solve(chol_b, g)
+    value = (-0.5 * z @ z - np.sum(np.log(np.diag(chol_b))) + 2.0 * np.sum(np.log(np.diag(chol_a)))
+             - 0.5 * n * math.log(2.0 * math.pi))
+    if not derivatives:
+        return NoisyLaplaceTerms(float(value))
+    inv_chol_b = np.linalg.solve(chol_b, np.eye(n))
+    b_inv = inv_chol_b.T @ inv_chol_b
+    inv_chol_a = np.linalg.solve(chol_a, np.eye(n))
+    a_inv = inv_chol_a.T @ inv_chol_a
+    h = inv_chol_b.T @ z                                    # B^-1 g
+    n_mat = 0.5 * (np.outer(h, h) - b_inv)                   # dL/dB
+    an = a_mat @ n_mat
+    cross = noise[:, None] * an                              # S A N
+    d_a = n_mat + cross + cross.T + a_inv                    # dL/dA
+    noise_grad = np.einsum("ij,ji->i", an, a_mat)            # diag(A N A)
+    return NoisyLaplaceTerms(float(value), -h, -d_a, noise_grad)

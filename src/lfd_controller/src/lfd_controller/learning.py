@@ -8,14 +8,14 @@ RewardFileError when one is missing or malformed.
 import json
 import time
 from pathlib import Path
-from typing import Callable, Dict, Optional, Sequence
+from typing import Any, Callable, Dict, Optional, Sequence
 
 import yaml
 from threadpoolctl import threadpool_limits
 
 from lfd_controller import plots as plotting
 from lfd_controller.cioc import LinearCIOC
-from lfd_controller.demos import Demonstration, demos_summary, trim_to_goal
+from lfd_controller.demos import Demonstration, demos_summary, trim_to_goal, windows
 from lfd_controller.errors import LfdError, RewardFileError
 from lfd_controller.features import FeatureSet
 from lfd_controller.gp_cioc import GPCIOC
@@ -26,28 +26,64 @@ RewardStore = Callable[[object, Dict], str]
 
 
 def person_features() -> FeatureSet:
-    """The feature set for demonstrations people give with a joystick: the original features
-    plus a preferred cruising speed (forward_command) and braking as one arrives (goal_slowing).
-    See README "Learning from people" for why."""
-    return FeatureSet(forward_command=True, goal_slowing=True)
+    """The feature set for demonstrations people give with a joystick (README "Learning from
+    people"): progress toward the goal per step (v cos(bearing to goal): the same pull at any
+    distance, none at the goal) instead of the summed goal distance, the goal heading, the
+    obstacle's proximity at three fall-off lengths (0.35, 0.5, 0.8 m) and 1 s ahead (a smooth
+    time-to-collision), the obstacle-between-me-and-the-goal feature, and the squared commands."""
+    return FeatureSet(goal_distance=True, goal_progress=True, proximity_widths=(0.5, 0.8),
+                      predicted=1.0, state_effort=True)
 
 
-# What the person features mean: far from the goal or near the obstacle is never better, nor is
-# effort.
-PERSON_SIGNS = {"goal_distance": -1, "obstacle_proximity": -1, "obstacle_ahead": -1,
-                "goal_slowing": -1, "speed_effort": -1, "turn_effort": -1}
+# What the person features mean: progress and facing the goal are never worse, nearness to the
+# obstacle and effort never better.
+PERSON_SIGNS = {"goal_distance": -1, "goal_heading": 1, "goal_progress": 1, "obstacle_proximity": -1,
+                "obstacle_proximity_0.5": -1, "obstacle_proximity_0.8": -1, "obstacle_ahead": -1,
+                "obstacle_predicted": -1, "speed_squared": -1, "turn_squared": -1,
+                "speed_effort": -1, "turn_effort": -1}
+# Command noise of a joystick (quantised stick, hand): learned with the weights.
+PERSON_NOISE = "learn"
 
 
 def fit_reward(demos: Sequence[Demonstration], kind: str = "linear", seed: int = 0,
-               features: Optional[FeatureSet] = None, signs: Optional[dict] = None):
+               features: Optional[FeatureSet] = None, signs: Optional[dict] = None,
+               action_noise=None):
     """(reward, learner) from demonstrations with the linear or GP CIOC (features: default
-    FeatureSet())."""
+    FeatureSet(); signs and action_noise: LinearCIOC's)."""
     if kind not in ("linear", "gp"):
         raise LfdError(f"reward kind must be 'linear' or 'gp', got {kind!r}")
-    learner = (LinearCIOC(features, random_state=seed, signs=signs) if kind == "linear"
-               else GPCIOC(features, random_state=seed))
+    learner = (LinearCIOC(features, random_state=seed, signs=signs, action_noise=action_noise)
+               if kind == "linear" else GPCIOC(features, random_state=seed))
     with threadpool_limits(1):      # small matrices: BLAS threads only contend (10x slower under load)
         learner.fit(list(demos))
+    return learner.reward_, learner
+
+
+# How person demonstrations are learned from (README "Learning from people"): cut into 4 s windows
+# every 2 s, each a locally optimal plan from the recorded state where it starts (a person
+# re-decides continuously, as the receding-horizon controller does); the Gauss-Newton Hessian (the
+# acceleration limit's curvature makes the exact H indefinite under a jittery stick); command noise
+# learned with the weights.
+PERSON_WINDOW, PERSON_STRIDE = 40, 20
+# How the controller drives with a person reward: 20 steps of 0.4 s (8 s: far enough to see past
+# the obstacle - at 4 s stopping in front of it ranks above going round), no terminal weight (the
+# progress feature's sum is already the distance made good), detour seeds 0.8 m beside the obstacle
+# (RecedingHorizonController options).
+PERSON_CONTROLLER = {"horizon": 20, "plan_dt": 0.4, "terminal": 0.0, "detour": 0.8}
+# What reward_controller needs to drive a person reward (saved with it, `controller:` in the file):
+# PERSON_CONTROLLER plus the fixed collision barrier (m beyond touching; planner.CollisionBarrier).
+PERSON_DRIVING = dict(PERSON_CONTROLLER, collision_margin=0.1)
+
+
+def fit_person_reward(demos: Sequence[Demonstration], seed: int = 0):
+    """(reward, learner): linear CIOC over person_features() with PERSON_SIGNS and learned command
+    noise, from demonstrations cut where they first reach the goal, in PERSON_WINDOW-step windows."""
+    pieces = [piece for demo in demos
+              for piece in windows(trim_to_goal(demo, 0), PERSON_WINDOW, PERSON_STRIDE)]
+    learner = LinearCIOC(person_features(), random_state=seed, signs=PERSON_SIGNS,
+                         action_noise=PERSON_NOISE, second_order=False)
+    with threadpool_limits(1):
+        learner.fit(pieces)
     return learner.reward_, learner
 
 
@@ -73,24 +109,43 @@ def load_reward(path):
     return reward_from_dict(data)
 
 
+def controller_settings(path) -> Dict[str, Any]:
+    """The controller settings saved with a reward (`info.controller`; {} when there are none)."""
+    try:
+        data = yaml.safe_load(Path(path).read_text()) or {}
+    except (OSError, yaml.YAMLError) as err:
+        raise RewardFileError(f"cannot read reward file {path}: {err}") from err
+    settings = (data.get("info") or {}).get("controller") or {}
+    if not isinstance(settings, dict):
+        raise RewardFileError(f"reward file {path}: info.controller must be a mapping")
+    return dict(settings)
+
+
 def learn_and_save(demos: Sequence[Demonstration], *, kind: str = "linear", output: str,
                    plots: str = "", seed: int = 0, trim_steps: Optional[int] = 10,
                    store: Optional[RewardStore] = None) -> str:
-    """Learn, save (store, plot); returns a summary. Demos are cut `trim_steps` after first
-    reaching the goal (None: uncut), so idling after a drive does not count as demonstrated
-    behaviour; `store(reward, info)`, when given, also keeps the reward elsewhere."""
+    """Learn, save (store, plot); returns a summary. kind "linear" or "gp" (default features) or
+    "person" (fit_person_reward: drive it with PERSON_CONTROLLER and a collision barrier). Demos
+    are cut `trim_steps` after first reaching the goal (None: uncut), so idling after a drive does
+    not count as demonstrated behaviour; `store(reward, info)`, when given, also keeps the reward
+    elsewhere."""
     demos = list(demos)
     if trim_steps is not None:
         demos = [trim_to_goal(d, trim_steps) for d in demos]
     started = time.monotonic()
-    reward, learner = fit_reward(demos, kind, seed)
+    if kind == "person":
+        reward, learner = fit_person_reward(demos, seed)
+    else:
+        reward, learner = fit_reward(demos, kind, seed)
     seconds = time.monotonic() - started
     info = {"demonstrations": len(demos), "steps": int(sum(d.length for d in demos)),
             "learning_seconds": round(seconds, 2), "beta": float(learner.beta_),
             "log_likelihood_per_demo": float(learner.log_likelihood_)}
+    if kind == "person":
+        info["controller"] = dict(PERSON_DRIVING)
     path = save_reward(reward, output, **info)
     lines = [f"learned a {kind} reward from {demos_summary(demos)} in {seconds:.1f} s -> {path}"]
-    if kind == "linear":
+    if kind in ("linear", "person"):
         lines.append("weights: " + json.dumps(reward.to_dict()["weights"]))
     if store is not None:
         lines.append(f"stored in the database as {store(reward, info)}")

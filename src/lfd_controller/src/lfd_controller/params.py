@@ -8,6 +8,7 @@ with `robot_common.ros_node.read_config`. `learn_reward` is a command-line tool:
 built from `LearnRewardConfig` (`learn_reward_parser`).
 """
 import argparse
+import dataclasses
 from dataclasses import dataclass, fields
 from typing import Any, Dict, List, Optional, Sequence
 
@@ -81,12 +82,21 @@ class RewardControllerConfig(NodeConfig):
     robot_radius: float = param(0.18, "robot radius (m; the scenario's when one is received)")
     collision_margin: float = param(0.0, "> 0: add a fixed collision barrier this far (m) beyond "
                                          "touching the obstacle to the learned reward; 0: none")
+    detour: float = param(0.0, "> 0: also try plans passing this far (m) beside the obstacle's "
+                               "centre (0: none; person rewards: 0.8)")
     frame: str = param("odom", "frame of the published plan")
     enabled: bool = param(True, "drive from the start (service ~enable switches)")
+    reward_settings: bool = param(True, "drive with the controller settings saved with the reward "
+                                        "(learn_reward --kind person saves horizon, plan_dt, "
+                                        "terminal, detour, collision_margin) instead of these")
+
+    SAVED_SETTINGS = ("horizon", "plan_dt", "terminal", "detour", "collision_margin")
 
     def check(self) -> None:
         if not self.rate > 0:
             raise ConfigError(f"~rate must be positive, got {self.rate!r}")
+        if self.detour < 0:
+            raise ConfigError(f"~detour must be >= 0, got {self.detour!r}")
         if self.collision_margin < 0:
             raise ConfigError(f"~collision_margin must be >= 0, got {self.collision_margin!r}")
 
@@ -94,10 +104,23 @@ class RewardControllerConfig(NodeConfig):
         """The robot's limits (ModelError when one is not positive)."""
         return UnicycleLimits(**{name: getattr(self, name) for name in LIMIT_NAMES})
 
+    def with_reward_settings(self, settings: Dict[str, Any]) -> "RewardControllerConfig":
+        """This configuration with the reward's saved controller settings applied (when
+        ~reward_settings); ConfigError for an unknown setting or a bad value."""
+        if not self.reward_settings or not settings:
+            return self
+        unknown = sorted(set(settings) - set(self.SAVED_SETTINGS))
+        if unknown:
+            raise ConfigError(f"the reward file's controller settings {unknown} are not among "
+                              f"{list(self.SAVED_SETTINGS)}")
+        changed = dataclasses.replace(self, **{k: type(getattr(self, k))(v) for k, v in settings.items()})
+        changed.check()
+        return changed
+
     def controller_options(self) -> Dict[str, Any]:
         """Keyword arguments of planner.RecedingHorizonController."""
         return {"horizon": self.horizon, "plan_dt": self.plan_dt, "terminal": self.terminal,
-                "max_iter": self.max_iter}
+                "max_iter": self.max_iter, "detour": self.detour}
 
 
 @dataclass
@@ -110,7 +133,8 @@ class LearnRewardConfig(NodeConfig):
     session_id: str = param("", "only database demonstrations recorded with this session id")
     robot_ids: List[str] = param([], "only database demonstrations recorded by these robots (a "
                                      "fleet's central database holds every robot's); empty: all")
-    kind: str = param("linear", "reward model", choices=("linear", "gp"))
+    kind: str = param("linear", "reward model (person: learning.fit_person_reward, for joystick "
+                                "demonstrations)", choices=("linear", "gp", "person"))
     output: str = param("", "reward file to write (YAML)")
     store_db: bool = param(False, "also store the reward in --db-url")
     plots: str = param("", "folder for plots of demos and reward field")

@@ -76,6 +76,37 @@ def seed_commands(model, count: int, turns: Sequence[float] = (0.0, 0.8, -0.8, 1
             for turn in turns]
 
 
+def detour_seeds(model, count: int, state, t0: float, task: Task, offset: float,
+                 speed: float = 0.5) -> list:
+    """Initial guesses that pass the obstacle on either side: pure pursuit, at `speed` x v_max,
+    of a waypoint `offset` m beside the obstacle (across the line to the goal, where the
+    obstacle is when the robot gets there), then of the goal. A local optimiser started from
+    straight or turning guesses stops in front of an obstacle that blocks the goal; these give it
+    both ways around (the reward still decides)."""
+    state = np.asarray(state, float)
+    goal = np.asarray(task.goal, float)
+    seeds = []
+    for side in (1.0, -1.0):
+        x, actions, passed = state.copy(), [], False
+        for k in range(count):
+            t = t0 + k * model.dt
+            obstacle = np.asarray(task.obstacle_position(np.array(t)), float).reshape(2)
+            to_goal = goal - x[:2]
+            normal = np.array([-to_goal[1], to_goal[0]]) / max(np.linalg.norm(to_goal), 1e-9)
+            waypoint = obstacle + side * offset * normal
+            passed = passed or np.dot(waypoint - x[:2], to_goal) < 0.0 or \
+                np.linalg.norm(waypoint - x[:2]) < 0.2
+            aim = goal if passed else waypoint
+            error = np.arctan2(aim[1] - x[1], aim[0] - x[0]) - x[2]
+            error = np.arctan2(np.sin(error), np.cos(error))
+            command = np.array([speed * model.limits.v_max * max(np.cos(error), 0.0),
+                                np.clip(2.0 * error, -model.limits.w_max, model.limits.w_max)])
+            actions.append(command)
+            x = model.step(x, command)
+        seeds.append(np.array(actions))
+    return seeds
+
+
 def plan_from_seeds(reward, model, task: Task, start, t0: float, count: int, *, max_iter: int = 200,
                     seeds: Optional[list] = None):
     """The best locally optimal plan over several initial guesses: (commands, R)."""
@@ -141,12 +172,15 @@ class RecedingHorizonController:
         every `seed_every` calls (turning seeds find ways around an obstacle that the warm start,
         a local optimum, misses); budget: seconds one call may take (None: no limit) - the
         seeds are skipped once the warm start has used half of it, and calls that still exceed
-        it are counted in `overruns_` (cycle_times_ keeps every call's duration).
+        it are counted in `overruns_` (cycle_times_ keeps every call's duration);
+        detour: > 0 adds two detour_seeds (pure pursuit past the obstacle this far from its
+        centre on either side) to the seeds (0: none).
     """
 
     def __init__(self, reward, model, *, horizon: int = 20, plan_dt: Optional[float] = 0.2,
                  terminal: float = 10.0, max_iter: int = 15, seed_iter: int = 6, seed_every: int = 5,
-                 seed_turns: Sequence[float] = (0.0, 1.2, -1.2), budget: Optional[float] = None):
+                 seed_turns: Sequence[float] = (0.0, 1.2, -1.2), budget: Optional[float] = None,
+                 detour: float = 0.0):
         if horizon < 2:
             raise LfdError(f"the planning horizon must be at least 2 steps, got {horizon}")
         if plan_dt is not None and not plan_dt > 0:
@@ -159,6 +193,7 @@ class RecedingHorizonController:
         if budget is not None and not budget > 0:
             raise LfdError(f"the cycle budget must be positive seconds, got {budget!r}")
         self.budget = budget
+        self.detour = float(detour)
         self.reset()
 
     def reset(self) -> None:
@@ -181,6 +216,8 @@ class RecedingHorizonController:
         started = time.perf_counter()
         warm = self._warm_start(t)
         seeds = seed_commands(self.model, self.horizon, self.seed_turns)
+        if self.detour > 0:
+            seeds += detour_seeds(self.model, self.horizon, state, t, task, self.detour)
         candidates = []
         if warm is not None:
             candidates.append(optimise_commands(self.reward, self.model, task, state, t, warm,

@@ -12,7 +12,7 @@ from std_srvs.srv import SetBool, SetBoolResponse
 from threadpoolctl import threadpool_limits
 
 from lfd_controller.features import Task
-from lfd_controller.learning import load_reward
+from lfd_controller.learning import controller_settings, load_reward
 from lfd_controller.params import RewardControllerConfig
 from lfd_controller.planner import CollisionBarrier, RecedingHorizonController
 from robot_common.errors import ModelError, TaskError
@@ -32,6 +32,7 @@ class RewardControllerNode:
       ~v_max, ~w_max, ~a_max, ~alpha_max: the robot's limits (the scenario's when one is received),
       ~obstacle_radius (double, 0.25), ~robot_radius (double, 0.18), ~collision_margin (double,
       0: > 0 adds planner.CollisionBarrier at robot + obstacle radius + margin to the reward),
+      ~detour (double, 0: > 0 adds planner.detour_seeds this far beside the obstacle),
       ~frame (str, "odom"), ~enabled (bool, true).
     Topics in: odom (nav_msgs/Odometry), goal (geometry_msgs/PoseStamped), obstacle
       (nav_msgs/Odometry: position and velocity; predicted at constant velocity), scenario
@@ -180,4 +181,9 @@ def start() -> RewardControllerNode:
     malformed), the controller, ROS wiring."""
     single_threaded_blas()
     config = read_config(RewardControllerConfig)
-    return RewardControllerNode(load_reward(config.reward_file), config).setup()
+    reward = load_reward(config.reward_file)
+    saved = controller_settings(config.reward_file)
+    config = config.with_reward_settings(saved)
+    if saved and config.reward_settings:
+        rospy.loginfo("driving with the controller settings saved with the reward: %s", saved)
+    return RewardControllerNode(reward, config).setup()

@@ -74,6 +74,10 @@ class RegionRecommenderConfig(NodeConfig):
     """The region recommender's ~parameters (see the module docstring)."""
 
     labels_path: str = param("", "map_labelling JSON label file; re-read when it changes")
+    descriptions_path: str = param("", "optional YAML/JSON file of label: description (what a "
+                                   "visitor's sign says, e.g. 'grasp: the GRASP robotics "
+                                   "laboratory'); adds to / replaces the label file's "
+                                   "'description' fields; re-read when it changes")
     embedding_service: str = param("/embedding_server/embed", "the embedding server's ~embed")
     embedding_check_period: float = param(1.0, "seconds between checks of the embedding service "
                                           "while it is missing or still loading (waits as long "

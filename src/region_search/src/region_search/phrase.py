@@ -13,6 +13,10 @@ with the label's bare name text counts `name_text_weight` against the expanded t
 1 - `name_text_weight` (WordNet's senses of a proper name mislead: "grasp" is no robotics lab), and
 `name_spelling_weight` x text_similarity.name_spelling_score adds an exact / fuzzy name match
 ("skirkanitch", "Charity's", "towne 311").
+A label's optional description (Region.description: "the GRASP robotics laboratory") is part of
+its name text ("grasp, the GRASP robotics laboratory"), of its expanded text and of the names the
+spelling stage matches. Numbers said as words are read as digits first ("room three eleven" ->
+"room 311", text_similarity.spoken_numbers), for the phrase vector and the number rule alike.
 It is the region recommender's method when the embedding service serves phrase vectors (backend
 "sentence"); with word2vec the word-level `RegionRecommender` is better. Same interface:
 `set_regions`, `recommend` -> `Recommendation`.
@@ -24,8 +28,21 @@ import numpy as np
 from region_search.corpora import WordNet
 from region_search.embeddings import EmbeddedWords, phrase_tokens
 from region_search.errors import EmbeddingError
-from region_search.recommender import ExpansionWeights, LabelExpander, RankedRegion, Recommendation, Region
-from region_search.text_similarity import content_words, is_number, name_spelling_score, tokenize
+from region_search.recommender import (
+    ExpansionWeights,
+    LabelExpander,
+    RankedRegion,
+    Recommendation,
+    Region,
+    descriptions_of,
+)
+from region_search.text_similarity import (
+    content_words,
+    is_number,
+    name_spelling_score,
+    spoken_numbers,
+    tokenize,
+)
 
 __all__ = ["PhraseRegionRecommender"]
 
@@ -45,36 +62,49 @@ class PhraseRegionRecommender:
         name_text_weight: share of the cosine with the bare name text (the rest: the expanded
             text); 0: the expanded text only.
         name_spelling_weight: weight of the name-spelling match (0: none).
+        number_words: read numbers said as words as digits ("three eleven" -> 311).
     """
 
     method = "phrase"
 
     def __init__(self, embed_phrases: EmbedPhrases, *, wordnet: Optional[WordNet] = None,
                  weights: ExpansionWeights = ExpansionWeights(), number_weight: float = 0.2,
-                 name_text_weight: float = 0.3, name_spelling_weight: float = 0.2):
+                 name_text_weight: float = 0.3, name_spelling_weight: float = 0.2,
+                 number_words: bool = True):
         self.embed_phrases = embed_phrases
         self.number_weight = number_weight
         self.name_text_weight = name_text_weight
         self.name_spelling_weight = name_spelling_weight
+        self.number_words = number_words
         self.expander = LabelExpander(wordnet, weights)
         self.regions: List[Region] = []
         self._texts: Dict[str, str] = {}
         self._vectors: Dict[str, np.ndarray] = {}
         self._name_vectors: Dict[str, np.ndarray] = {}
+        self._described: Dict[str, str] = {}
 
-    def label_text(self, name: str) -> str:
-        """The text a label is encoded as: its name words, then its WordNet words."""
-        tokens = tokenize(name)
-        words = self.expander.expand(name) if self.expander.wordnet is not None else {}
+    @staticmethod
+    def name_text(name: str, description: str = "") -> str:
+        """A label's bare name text: its name words, then its description if it has one."""
+        text = " ".join(tokenize(name))
+        return f"{text}, {description}" if description else text
+
+    def label_text(self, name: str, description: str = "") -> str:
+        """The text a label is encoded as: its name text, then its WordNet words."""
+        tokens = tokenize(name) + tokenize(description)
+        words = (self.expander.expand(name, description) if self.expander.wordnet is not None
+                 else {})
         extra = sorted((w for w in words if w not in tokens), key=lambda w: (-words[w][0], w))
-        return " ".join(tokens) + (": " + " ".join(extra) if extra else "")
+        return self.name_text(name, description) + (": " + " ".join(extra) if extra else "")
 
     def set_regions(self, regions: Sequence[Region]) -> None:
         """Use these regions from now on (only labels not seen before are encoded)."""
-        names = sorted({region.name for region in regions} - set(self._vectors))
+        described = descriptions_of(regions)
+        names = sorted(name for name in described
+                       if name not in self._vectors or self._described.get(name) != described[name])
         if names:
-            texts = [self.label_text(name) for name in names]
-            bare = [" ".join(tokenize(name)) for name in names]
+            texts = [self.label_text(name, described[name]) for name in names]
+            bare = [self.name_text(name, described[name]) for name in names]
             with_names = texts + (bare if self.name_text_weight else [])
             embedded = self.embed_phrases(with_names)
             if len(embedded.vectors) != len(with_names):
@@ -83,6 +113,7 @@ class PhraseRegionRecommender:
             vectors = [np.asarray(v, dtype=np.float64) for v in embedded.vectors]
             for index, (name, text) in enumerate(zip(names, texts)):
                 self._texts[name] = text
+                self._described[name] = described[name]
                 self._vectors[name] = vectors[index]
                 self._name_vectors[name] = (vectors[len(names) + index] if self.name_text_weight
                                             else vectors[index])
@@ -91,17 +122,19 @@ class PhraseRegionRecommender:
     def recommend(self, phrase: str, top_k: int = 3) -> Recommendation:
         """The `top_k` best regions (all when top_k <= 0), best first; EmptyPhraseError if empty."""
         phrase_tokens(phrase)  # EmptyPhraseError for a phrase without words
-        query = self.embed_phrases([phrase])
+        text = spoken_numbers(phrase) if self.number_words else phrase
+        query = self.embed_phrases([text])
         vector = np.asarray(query.vectors[0], dtype=np.float64)
-        numbers = {t for t in tokenize(phrase) if is_number(t)}
-        words = content_words(phrase)
+        numbers = {t for t in tokenize(text) if is_number(t)}
+        words = content_words(text)
         scores, explanations = {}, {}
         for name in {r.name for r in self.regions}:
             share = self.name_text_weight
             cosine = ((1.0 - share) * float(self._vectors[name] @ vector)
                       + share * float(self._name_vectors[name] @ vector))
             bonus, why = self._number_bonus(numbers, name)
-            spelled = name_spelling_score(words, name) if self.name_spelling_weight else 0.0
+            spelled = (name_spelling_score(words, self.name_text(name, self._described[name]))
+                       if self.name_spelling_weight else 0.0)
             if spelled > 0:
                 why += f"; name spelled {spelled:.2f} (+{self.name_spelling_weight * spelled:.2f})"
             scores[name] = cosine + bonus + self.name_spelling_weight * spelled
@@ -115,7 +148,7 @@ class PhraseRegionRecommender:
 
     def _number_bonus(self, numbers, name: str):
         """(score change, explanation) from the numbers of the phrase and of the label."""
-        own = {t for t in tokenize(name) if is_number(t)}
+        own = {t for t in tokenize(name) + tokenize(self._described.get(name, "")) if is_number(t)}
         if not numbers or not own or not self.number_weight:
             return 0.0, ""
         shared = sorted(numbers & own)

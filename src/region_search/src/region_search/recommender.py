@@ -1,17 +1,24 @@
 """Which labelled region of the map a phrase means ("drinking fountain" -> water_fountain).
 
 - `load_label_file(path)`: regions from a map_labelling JSON file
-  (`{"label": {"x": .., "y": .., "orientation": [qx, qy, qz, qw]}}`).
+  (`{"label": {"x": .., "y": .., "orientation": [qx, qy, qz, qw]}}`); a label may carry an
+  optional `"description"`: what a visitor's sign would say ("the GRASP robotics laboratory").
+- `load_descriptions(path)` / `with_descriptions(regions, descriptions)`: descriptions from a
+  sidecar file (`{label: description}`, YAML or JSON) for label files one cannot edit.
+  A description counts as more name words of its label (both ranking methods).
 - `LabelExpander`: a label's words, plus (from WordNet) the synonyms, derivationally related words
   and definition words of the longest WordNet lemmas it contains: "water_fountain" also means
   "drinking fountain, bubbler: a public fountain to provide a jet of drinking water".
 - `RegionRecommender`: ranks regions for a phrase. Each query word finds its best match among a
   label's (weighted) words, by embedding cosine or by spelling (label-name words only: "towne",
   room numbers); the score is the SIF-weighted mean of these matches over the query's words.
-  A share of it (`name_text_weight`, 0.5, chosen on the dev phrases by
-  bench/nlp_region_accuracy.py --dev) is this score on the label's name words alone, so that
-  WordNet's senses of a name ("grasp", "far") do not drown the name itself.
+  A share of it (`name_text_weight`, 0.3, chosen on the dev phrases by
+  bench/nlp_region_accuracy.py --dev2; 0.5 in issue 18's first round) is this score on the
+  label's name words alone, so that WordNet's senses of a name ("grasp", "far") do not drown
+  the name itself.
   Word vectors come from a callable (the embedding service's client, or a model in-process).
+  Numbers said as words in a phrase are read as digits first ("room three eleven" -> "room 311",
+  text_similarity.spoken_numbers).
 """
 import json
 from dataclasses import dataclass, field
@@ -23,10 +30,19 @@ import numpy as np
 from region_search.corpora import WordNet
 from region_search.embeddings import EmbeddedWords, phrase_tokens
 from region_search.errors import EmbeddingError, LabelFileError
-from region_search.text_similarity import STOPWORDS, is_number, spelling_similarity, tokenize
+from region_search.text_similarity import (
+    STOPWORDS,
+    content_words,
+    is_number,
+    spelling_similarity,
+    spoken_numbers,
+    tokenize,
+)
 
-__all__ = ["Region", "load_label_file", "parse_labels", "ExpansionWeights", "LabelExpander",
-           "RankedRegion", "Recommendation", "RegionRecommender"]
+__all__ = ["Region", "load_label_file", "parse_labels", "load_descriptions", "with_descriptions",
+           "descriptions_of",
+           "ExpansionWeights", "LabelExpander", "RankedRegion", "Recommendation",
+           "RegionRecommender"]
 
 EmbedWords = Callable[[List[str]], EmbeddedWords]
 
@@ -41,6 +57,7 @@ class Region:
     z: float = 0.0
     orientation: Tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
     source: str = "label_file"
+    description: str = ""  # optional: what a visitor's sign would say about the place
 
 
 def parse_labels(data, *, origin: str = "labels") -> List[Region]:
@@ -60,8 +77,13 @@ def parse_labels(data, *, origin: str = "labels") -> List[Region]:
                                  "(want [qx, qy, qz, qw])")
         if not tokenize(name):
             raise LabelFileError(f"{origin}: label {name!r} has no letters or digits")
+        description = pose.get("description", "")
+        if not isinstance(description, str):
+            raise LabelFileError(f"{origin}: label {name!r} has a description that is not a "
+                                 f"string: {description!r}")
         regions.append(Region(name, float(pose["x"]), float(pose["y"]), float(pose.get("z", 0.0)),
-                              tuple(float(v) for v in orientation)))
+                              tuple(float(v) for v in orientation),
+                              description=" ".join(description.split())))
     return regions
 
 
@@ -76,6 +98,37 @@ def load_label_file(path) -> List[Region]:
     return parse_labels(data, origin=str(path))
 
 
+def load_descriptions(path) -> Dict[str, str]:
+    """{label: description} from a sidecar file: a YAML (or JSON) mapping of label names to
+    strings, e.g. `grasp: the GRASP robotics laboratory`; LabelFileError names a bad entry."""
+    import yaml
+
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except OSError as err:
+        raise LabelFileError(f"cannot read description file {path}: {err.strerror}") from err
+    except yaml.YAMLError as err:
+        raise LabelFileError(f"description file {path} is not valid YAML/JSON: {err}") from err
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise LabelFileError(f"{path}: expected a mapping of label -> description, got "
+                             f"{type(data).__name__}")
+    for name, text in data.items():
+        if not isinstance(name, str) or not isinstance(text, str):
+            raise LabelFileError(f"{path}: entry {name!r}: {text!r} is not label: description text")
+    return {name: " ".join(text.split()) for name, text in data.items()}
+
+
+def with_descriptions(regions: Sequence[Region], descriptions: Dict[str, str]) -> List[Region]:
+    """The regions with the descriptions given for their names (these replace a label file's)."""
+    from dataclasses import replace
+
+    return [replace(r, description=descriptions[r.name]) if r.name in descriptions else r
+            for r in regions]
+
+
 @dataclass(frozen=True)
 class ExpansionWeights:
     """How much a label word counts, by where it comes from."""
@@ -85,6 +138,8 @@ class ExpansionWeights:
     derived: float = 0.8
     definition: float = 0.6
     senses: int = 2  # WordNet senses used per lemma (most frequent first)
+    description: float = 1.0  # the content words of a label's description (given by a user)
+    expand_description: bool = True  # also expand the description's words with WordNet
 
 
 class LabelExpander:
@@ -95,14 +150,21 @@ class LabelExpander:
         self.wordnet = wordnet
         self.weights = weights
 
-    def expand(self, label: str) -> Dict[str, Tuple[float, str]]:
-        """word -> (weight, origin) for a label name such as "vending_machines"."""
+    def expand(self, label: str, description: str = "") -> Dict[str, Tuple[float, str]]:
+        """word -> (weight, origin) for a label name such as "vending_machines" (and its
+        optional description, whose content words count `weights.description`)."""
         tokens = tokenize(label)
         words: Dict[str, Tuple[float, str]] = {}
         for token in tokens:
             _add(words, token, self.weights.name, "name")
+        described = [t for t in tokenize(description) if t not in STOPWORDS]
+        for token in described:
+            _add(words, token, self.weights.description, "description")
         for _, _, lemma, synsets in self.lemma_spans(tokens):
             self._add_synsets(words, lemma, synsets)
+        if self.weights.expand_description and description:
+            for _, _, lemma, synsets in self.lemma_spans(tokenize(description)):
+                self._add_synsets(words, lemma, synsets)
         return words
 
     def expand_words(self, tokens: Sequence[str]) -> List[Dict[str, Tuple[float, str]]]:
@@ -156,6 +218,15 @@ class LabelExpander:
                     _add(words, token, w.definition, f"definition of {lemma}")
 
 
+def descriptions_of(regions: Sequence[Region]) -> Dict[str, str]:
+    """{label: its description} (several regions of one name: the first non-empty one)."""
+    described: Dict[str, str] = {}
+    for region in regions:
+        if not described.get(region.name):
+            described[region.name] = region.description
+    return described
+
+
 def _add(words: Dict[str, Tuple[float, str]], token: str, weight: float, origin: str) -> None:
     if token not in words or words[token][0] < weight:
         words[token] = (weight, origin)
@@ -190,13 +261,16 @@ class RegionRecommender:
         method: "align" (each query word's best label word) or "mean" (cosine of weighted means).
         weights: how much expanded words count.
         name_text_weight: with `wordnet`, the share of the score computed on the label's name
-            words alone (the rest: on the expanded words); 0: the expanded words only.
+            words (and description words) alone (the rest: on the expanded words); 0: the
+            expanded words only.
+        number_words: read numbers said as words as digits ("three eleven" -> 311).
     """
 
     def __init__(self, embed_words: Optional[EmbedWords], *, wordnet: Optional[WordNet] = None,
                  use_spelling: bool = True, expand_query: bool = False, method: str = "align",
                  weights: ExpansionWeights = ExpansionWeights(), min_spelling: float = 0.5,
-                 hubness: bool = False, name_text_weight: float = 0.5):
+                 hubness: bool = False, name_text_weight: float = 0.3,
+                 number_words: bool = True):
         if method not in ("align", "mean"):
             raise EmbeddingError(f"unknown method {method!r}; use 'align' or 'mean'")
         self.embed_words = embed_words
@@ -206,34 +280,42 @@ class RegionRecommender:
         self.method = method
         self.min_spelling = min_spelling
         self.hubness = hubness and embed_words is not None
+        self.number_words = number_words
         self._hub: Dict[str, float] = {}
         self._hub_labels: Tuple[str, ...] = ()
         self.regions: List[Region] = []
         # label -> (words, weights, origins, name tokens)
         self._labels: Dict[str, Tuple[List[str], np.ndarray, List[str], List[str]]] = {}
+        self._described: Dict[str, str] = {}  # label -> the description its words came from
         self._vectors: Dict[str, Optional[np.ndarray]] = {}
         self.name_text_weight = name_text_weight if wordnet is not None else 0.0
         # The same ranking on the label names alone (its share: name_text_weight).
         self._names: Optional[RegionRecommender] = None
         if self.name_text_weight:
             self._names = RegionRecommender(embed_words, use_spelling=use_spelling, method=method,
-                                            min_spelling=min_spelling, hubness=hubness)
+                                            weights=weights, min_spelling=min_spelling,
+                                            hubness=hubness, number_words=number_words)
 
     def set_regions(self, regions: Sequence[Region]) -> None:
         """Use these regions from now on (label words are expanded and embedded once)."""
-        names = sorted({region.name for region in regions} - set(self._labels))
-        expansions = {name: self.expander.expand(name) for name in names}
+        described = descriptions_of(regions)
+        names = sorted(name for name in described
+                       if name not in self._labels or self._described.get(name) != described[name])
+        expansions = {name: self.expander.expand(name, described[name]) for name in names}
         self._embed_missing([w for words in expansions.values() for w in words])
         for name, words in expansions.items():
             ordered = sorted(words)
             self._labels[name] = (ordered, np.array([words[w][0] for w in ordered]),
-                                  [words[w][1] for w in ordered], tokenize(name))
+                                  [words[w][1] for w in ordered],
+                                  tokenize(name) + content_words(described[name])
+                                  if described[name] else tokenize(name))
+            self._described[name] = described[name]
         self.regions = list(regions)
         if self._names is not None:
             self._names.set_regions(regions)
-        label_set = tuple(sorted({r.name for r in regions}))
-        if self.hubness and label_set != self._hub_labels:  # only when the labels change
-            self._hub = self._hub_levels(list(label_set))
+        label_set = tuple(sorted(described.items()))
+        if self.hubness and (names or label_set != self._hub_labels):  # only when labels change
+            self._hub = self._hub_levels(sorted(described))
             self._hub_labels = label_set
 
     def _hub_levels(self, names: List[str]) -> Dict[str, float]:
@@ -279,6 +361,7 @@ class RegionRecommender:
     def _scores(self, phrase: str, embedded_query: Optional[EmbeddedWords] = None):
         """({label: (score, explanation)}, the query's EmbeddedWords); `embedded_query`: the
         phrase's words already embedded (used when there is no query expansion)."""
+        phrase = spoken_numbers(phrase) if self.number_words else phrase
         tokens = phrase_tokens(phrase)
         everything = tokenize(phrase)
         positions = [i for i, t in enumerate(everything) if t not in STOPWORDS]

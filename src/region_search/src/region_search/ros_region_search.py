@@ -24,7 +24,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import List, Optional, Tuple
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 import rospy
@@ -45,7 +45,13 @@ from region_search.errors import (
 from region_search.node_config import BackendConfig, RegionRecommenderConfig
 from region_search.phrase import PhraseRegionRecommender
 from region_search.progress import LOADING_PREFIX, LoadProgress
-from region_search.recommender import Region, RegionRecommender, load_label_file
+from region_search.recommender import (
+    Region,
+    RegionRecommender,
+    load_descriptions,
+    load_label_file,
+    with_descriptions,
+)
 from region_search.srv import (
     Embed,
     EmbedResponse,
@@ -299,7 +305,10 @@ class RegionRecommenderNode:
 
     Parameters (node_config.RegionRecommenderConfig; defaults in config/region_search.yaml,
     generated from it):
-      ~labels_path (str, ""): map_labelling JSON label file; re-read when it changes.
+      ~labels_path (str, ""): map_labelling JSON label file; re-read when it changes. A label
+          may carry a "description" (what a visitor's sign says about the place).
+      ~descriptions_path (str, ""): optional YAML/JSON {label: description} file (for label
+          files one cannot edit; its entries win); re-read when it changes.
       ~embedding_service (str, "/embedding_server/embed"): the embedding server's ~embed.
       ~embedding_check_period (float, 1.0): seconds between checks of the embedding service
           while it is missing or its model still loads; the node waits as long as it takes.
@@ -325,6 +334,9 @@ class RegionRecommenderNode:
     def __init__(self, config: RegionRecommenderConfig):
         self.config = config
         self.labels_path = config.labels_path
+        self.descriptions_path = config.descriptions_path
+        self.descriptions: Dict[str, str] = {}
+        self._descriptions_stamp = None
         self.client = EmbeddingClient(config.embedding_service)
         self.layer_service = config.layer_service
         self.layer_period = config.layer_period
@@ -402,8 +414,26 @@ class RegionRecommenderNode:
             self._last_log = now
             rospy.loginfo(f"region_recommender: {why}; waited {now - self._waiting_since:.0f} s")
 
+    def refresh_descriptions(self) -> None:
+        """(Re-)read the description file when its modification time changed."""
+        if not self.descriptions_path:
+            return
+        path = Path(self.descriptions_path)
+        stamp = path.stat().st_mtime_ns if path.is_file() else None
+        if stamp == self._descriptions_stamp:
+            return
+        self._descriptions_stamp = stamp
+        try:
+            self.descriptions = load_descriptions(path)
+            rospy.loginfo(f"region_recommender: {len(self.descriptions)} label descriptions "
+                          f"from {path}")
+        except LabelFileError as err:
+            self.descriptions = {}
+            rospy.logwarn(f"region_recommender: label descriptions not used: {err}")
+
     def refresh_file(self) -> None:
-        """(Re-)read the label file when its modification time changed."""
+        """(Re-)read the label file (and the description file) when they changed."""
+        self.refresh_descriptions()
         if not self.labels_path:
             return
         path = Path(self.labels_path)
@@ -432,7 +462,8 @@ class RegionRecommenderNode:
     def handle_recommend(self, request) -> RecommendRegionResponse:
         with self.lock:
             self.refresh_file()
-            regions = self.file_regions + self.layer_regions
+            regions = with_descriptions(self.file_regions + self.layer_regions,
+                                        self.descriptions)
             if not regions:
                 why = self.file_error or (f"label file {self.labels_path!r} missing" if
                                           self.labels_path else "no label file configured")

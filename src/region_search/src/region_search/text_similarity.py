@@ -9,13 +9,18 @@
   to_skirkanich), the name-matching stage both ranking methods add to their vector scores.
 - `SpellingIndex`: the vocabulary word spelled most like a given word (an inverted trigram index),
   the last fallback for a word without a vector.
+- `spoken_numbers("room three eleven")` -> "room 311": numbers said as words (two or more number
+  words in a row, or a run with "hundred") become digits, as people say room numbers: digit by
+  digit ("three one one"), in pairs ("three eleven", "three twenty-one") or in full ("three
+  hundred and eleven"). A single number word ("one of the labs") is left as it is.
 """
 import re
 from collections import defaultdict
 from typing import Dict, FrozenSet, Iterable, List, Optional, Sequence, Tuple
 
 __all__ = ["STOPWORDS", "tokenize", "content_words", "is_number", "trigrams",
-           "spelling_similarity", "SpellingIndex", "string_baseline_score", "name_spelling_score"]
+           "spelling_similarity", "SpellingIndex", "string_baseline_score", "name_spelling_score",
+           "spoken_numbers"]
 
 # The common English stop-word list (function words only; no domain words).
 STOPWORDS: FrozenSet[str] = frozenset("""
@@ -133,3 +138,86 @@ class SpellingIndex:
         if best is None or best_score < self.min_similarity or self._words[best] == word:
             return None
         return self._words[best], best_score
+
+
+_UNITS = {w: i for i, w in enumerate(
+    "zero one two three four five six seven eight nine ten eleven twelve thirteen fourteen "
+    "fifteen sixteen seventeen eighteen nineteen".split())}
+_TENS = {w: 10 * i for i, w in enumerate(
+    "twenty thirty forty fifty sixty seventy eighty ninety".split(), start=2)}
+# "twentyone": a tens word and a digit written together
+_DIGIT_WORDS = "|".join(w for w, v in _UNITS.items() if 1 <= v <= 9)
+_JOINED = re.compile(rf"^({'|'.join(_TENS)})({_DIGIT_WORDS})$")
+_WORD_OR_GAP = re.compile(r"[A-Za-z]+|[^A-Za-z]+")
+_NUMBER_GAP = re.compile(r"^[ \t-]+$")  # what may separate number words: spaces, hyphens
+
+
+def _number_word(word: str) -> bool:
+    word = word.lower()
+    return word in _UNITS or word in _TENS or word == "hundred" or bool(_JOINED.match(word))
+
+
+def _groups(words: List[str]) -> Optional[str]:
+    """Digits of a run of number words, or None when the run is no number."""
+    if "hundred" in words:
+        index = words.index("hundred")
+        head, tail = words[:index], [w for w in words[index + 1:] if w != "and"]
+        if len(head) != 1 or head[0] not in _UNITS or not 1 <= _UNITS[head[0]] <= 9:
+            return None
+        rest = _groups(tail) if tail else "0"
+        if rest is None or int(rest) > 99 or "hundred" in tail:
+            return None
+        return str(_UNITS[head[0]] * 100 + int(rest))
+    digits, index = "", 0
+    while index < len(words):
+        word = words[index]
+        joined = _JOINED.match(word)
+        if joined:
+            digits += str(_TENS[joined.group(1)] + _UNITS[joined.group(2)])
+        elif word in _TENS:
+            following = words[index + 1] if index + 1 < len(words) else ""
+            if following in _UNITS and 1 <= _UNITS[following] <= 9:
+                digits += str(_TENS[word] + _UNITS[following])
+                index += 1
+            else:
+                digits += str(_TENS[word])
+        elif word in _UNITS:
+            digits += str(_UNITS[word])
+        else:
+            return None
+        index += 1
+    return digits
+
+
+def spoken_numbers(text: str) -> str:
+    """`text` with its spoken numbers written as digits (see the module docstring):
+    "three eleven" -> "311", "three two one" -> "321", "three hundred and eleven" -> "311",
+    "go to three-twenty-one" -> "go to 321"; single number words stay words."""
+    parts = _WORD_OR_GAP.findall(text)
+    out: List[str] = []
+    index = 0
+    while index < len(parts):
+        if not _number_word(parts[index]):
+            out.append(parts[index])
+            index += 1
+            continue
+        # the longest run: number words separated by spaces/hyphens ("and" after "hundred")
+        run, end, cursor = [parts[index].lower()], index + 1, index + 1
+        while cursor + 1 < len(parts) and _NUMBER_GAP.match(parts[cursor]):
+            word = parts[cursor + 1].lower()
+            if _number_word(word) or (word == "and" and "hundred" in run
+                                      and cursor + 3 < len(parts)
+                                      and _number_word(parts[cursor + 3])):
+                run.append(word)
+                cursor += 2
+                end = cursor
+            else:
+                break
+        digits = _groups(run) if (len(run) >= 2 or _JOINED.match(run[0])) else None
+        if digits is None:
+            out.append(parts[index])
+            index += 1
+            continue
+        out.append(digits)
+        index = end
+    return "".join(out)

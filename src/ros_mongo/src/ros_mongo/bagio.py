@@ -30,6 +30,7 @@ from typing import Dict, Iterator, List, Optional, Sequence, Tuple, Union
 
 import genpy
 
+from ros_mongo.backends.base import PreparedRecords
 from ros_mongo.errors import BagError, StoreError, UnknownTypeError
 from ros_mongo.query import Query
 from ros_mongo.records import MessageRecord, TopicInfo, make_record, new_message_id
@@ -90,8 +91,9 @@ def import_bag(path: Union[str, Path], store: MessageStore, *, topics: Optional[
         source = robot_id or session_id
         total = bag.get_message_count(topic_filters=list(topics) if topics else None)
         bar = tqdm(total=total, unit="msg", desc=f"import {Path(path).name}", disable=not progress)
-        batch: List[Union[MessageRecord, TopicInfo]] = []
-        batch_weight, batch_messages = 0, 0
+        infos: List[TopicInfo] = []
+        records: List[MessageRecord] = []
+        batch_weight = 0
         seen: Dict[Tuple[str, str, str, str], TopicInfo] = {}
         per_topic: Dict[str, int] = {}
         try:
@@ -101,22 +103,21 @@ def import_bag(path: Union[str, Path], store: MessageStore, *, topics: Optional[
                 info = _topic_info(topic, header, source)
                 if info.key not in seen:
                     seen[info.key] = info
-                    batch.append(info)
+                    infos.append(info)
                 index = per_topic.get(topic, 0)
                 per_topic[topic] = index + 1
                 record_id = _bag_id(fingerprint, topic, index, stamp, robot_id)
-                batch.append(_record(topic, pytype, msg_type, md5sum, data, stamp, record_id, tags,
-                                     session_id, robot_id, store.max_array_len, info.callerid))
+                records.append(_record(topic, pytype, msg_type, md5sum, data, stamp, record_id, tags,
+                                       session_id, robot_id, store.max_array_len, info.callerid))
                 count += 1
                 size += len(data)
                 batch_weight += len(data)
-                batch_messages += 1
-                if batch_messages >= batch_size or batch_weight >= batch_bytes:
-                    writer.put(batch, batch_weight)
-                    bar.update(batch_messages)
-                    batch, batch_weight, batch_messages = [], 0, 0
-            writer.put(batch, batch_weight)
-            bar.update(batch_messages)
+                if len(records) >= batch_size or batch_weight >= batch_bytes:
+                    writer.put(infos, store.prepare_records(records), batch_weight)
+                    bar.update(len(records))
+                    infos, records, batch_weight = [], [], 0
+            writer.put(infos, store.prepare_records(records), batch_weight)
+            bar.update(len(records))
         except (rosbag.ROSBagException, OSError) as err:
             raise BagError(f"cannot read bag {path}: {err}") from None
         finally:
@@ -161,9 +162,10 @@ def _record(topic, pytype, msg_type, md5sum, data, stamp, record_id, tags, sessi
 
 
 class _BatchWriter:
-    """Writes batches on a thread while the caller prepares the next one (one batch queued, one
-    being written; `peak_bytes`: the most message bytes held in batches at once, counting the
-    one the caller filled)."""
+    """Writes batches on a thread while the caller decodes and encodes the next one (one batch
+    queued, one being written; `peak_bytes`: the most message bytes held in batches at once,
+    counting the one the caller filled). The caller encodes (`MessageStore.prepare_records`), so
+    this thread only sends: the server is kept busy while the next batch is being prepared."""
 
     def __init__(self, store: MessageStore):
         self.store = store
@@ -175,14 +177,14 @@ class _BatchWriter:
         self.thread = threading.Thread(target=self._run, name="ros_mongo_import", daemon=True)
         self.thread.start()
 
-    def put(self, batch: list, weight: int = 0) -> None:
+    def put(self, infos: List[TopicInfo], prepared: PreparedRecords, weight: int = 0) -> None:
         if self.error is not None:
             raise self.error
-        if batch:
+        if infos or prepared.records:
             with self._lock:  # the filled batch existed before it was queued
                 self.held += weight
                 self.peak_bytes = max(self.peak_bytes, self.held)
-            self.queue.put((batch, weight))
+            self.queue.put((infos, prepared, weight))
 
     def close(self) -> None:
         self.queue.put(None)
@@ -195,17 +197,16 @@ class _BatchWriter:
             item = self.queue.get()
             if item is None:
                 return
-            batch, weight = item
+            infos, prepared, weight = item
             try:
                 if self.error is None:
-                    for entry in batch:
-                        if isinstance(entry, TopicInfo):
-                            self.store.put_topic(entry)
-                    self.store.insert_records([e for e in batch if isinstance(e, MessageRecord)])
+                    for info in infos:
+                        self.store.put_topic(info)
+                    self.store.insert_prepared(prepared)
             except StoreError as err:
                 self.error = err
             finally:
-                del batch, item
+                del infos, prepared, item
                 with self._lock:
                     self.held -= weight
 

@@ -26,6 +26,7 @@ import sys
 from pathlib import Path
 from typing import List, Optional
 
+from ros_mongo.allocator import keep_freed_memory
 from ros_mongo.bagio import BATCH_BYTES, export_bag, import_bag
 from ros_mongo.errors import StoreError
 from ros_mongo.legacy import (
@@ -233,6 +234,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     argv = [a for a in argv if not re.match(r"^__\w+:=", a)]  # roslaunch's __name:= and __log:=
     args = parse_args(argv)
+    keep_freed_memory()  # image-sized buffers reuse memory instead of fresh pages (ros_mongo.allocator)
     try:
         run(args)
     except StoreError as err:

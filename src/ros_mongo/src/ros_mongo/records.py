@@ -10,6 +10,7 @@ Ids never conflict between robots or bags sharing one database:
   its own latching, callerid and definition (first writer wins only within one such key).
 """
 import hashlib
+import itertools
 import re
 import secrets
 import time
@@ -94,11 +95,18 @@ def id_part(text: Optional[str]) -> str:
     return _UNSAFE.sub(lambda m: "".join(f"%{b:02X}" for b in m.group(0).encode("utf-8")), text or "")
 
 
+#: Default id tokens: a random 48-bit start per process, counting up (one system call per process
+#: instead of one per message; two processes share a token only if their random starts are
+#: within a few million of each other, and then they would still need the same nanosecond).
+_TOKENS = itertools.count(secrets.randbits(48))
+
+
 def new_message_id(receive_secs: int, receive_nsecs: int, robot_id: Optional[str] = None, *,
                    token: Optional[str] = None) -> str:
     """A unique document id that sorts by receive time: `<ns, 19 digits>-<robot>-<token>`
-    (`<ns>-<token>` without a robot id); `token` defaults to 12 random hex digits."""
-    token = token or secrets.token_hex(6)
+    (`<ns>-<token>` without a robot id); `token` defaults to 12 hex digits, unique within this
+    process and random across processes."""
+    token = token or f"{next(_TOKENS) & 0xFFFFFFFFFFFF:012x}"
     stamp = f"{receive_secs * 1000000000 + receive_nsecs:019d}"
     return f"{stamp}-{id_part(robot_id)}-{token}" if robot_id else f"{stamp}-{token}"
 

@@ -15,6 +15,7 @@ from std_msgs.msg import Header
 from robot_common.errors import ConfigError
 from robot_common.params import NodeConfig, param
 from robot_common.ros_node import ros_home, run_node
+from ros_mongo.allocator import keep_freed_memory
 from ros_mongo.errors import StoreError
 from ros_mongo.legacy import legacy_config
 from ros_mongo.recorder import Recorder
@@ -227,4 +228,5 @@ def _start() -> RecorderNode:
 
 def main() -> int:
     """The ros_mongo_server executable: exit status 1 with one line on a bad configuration."""
+    keep_freed_memory()  # image-sized buffers reuse memory instead of fresh pages (ros_mongo.allocator)
     return run_node("ros_mongo_server", _start, loggers=("ros_mongo",), fatal=(StoreError, ValueError))

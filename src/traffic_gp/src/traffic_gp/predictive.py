@@ -13,6 +13,7 @@ from scipy import special, stats
 
 NODES, WEIGHTS = np.polynomial.hermite.hermgauss(24)
 LOG_WEIGHTS = np.log(WEIGHTS / np.sqrt(np.pi))
+POINT = (np.zeros(1), np.full(1, np.sqrt(np.pi)))    # one node: a point forecast (var = 0)
 CHUNK = 20000
 
 
@@ -27,10 +28,17 @@ def expected_std(mean, var):
     return np.sqrt(np.expm1(var) * np.exp(2.0 * mean + var))
 
 
+def _quadrature(var):
+    """Gauss-Hermite nodes and weights: one node where every variance is 0 (point forecasts,
+    e.g. a baseline's rate: all nodes would be equal)."""
+    return POINT if not np.any(np.asarray(var)) else (NODES, WEIGHTS)
+
+
 def _rates(mean, var, expo):
     mean, var, expo = np.broadcast_arrays(np.asarray(mean, float), np.asarray(var, float),
                                           np.asarray(expo, float))
-    f = mean[..., None] + np.sqrt(2.0 * np.maximum(var, 0.0))[..., None] * NODES
+    nodes = _quadrature(var)[0]
+    f = mean[..., None] + np.sqrt(2.0 * np.maximum(var, 0.0))[..., None] * nodes
     return expo[..., None] * np.exp(f)
 
 
@@ -57,14 +65,14 @@ def log_density(count, mean, var, expo, dispersion: Optional[float] = None):
         log_total = np.logaddexp(np.log(rates), np.log(r))
         log_p = (special.gammaln(count + r) - special.gammaln(r) - special.gammaln(count + 1.0)
                  + r * (np.log(r) - log_total) + count * (np.log(rates) - log_total))
-    return special.logsumexp(log_p + LOG_WEIGHTS, axis=-1)
+    return special.logsumexp(log_p + np.log(_quadrature(var)[1] / np.sqrt(np.pi)), axis=-1)
 
 
 def cdf(count, mean, var, expo, dispersion: Optional[float] = None):
     """P(N <= count) of the mixture, per row (count may be -1: gives 0)."""
     rates = _rates(mean, var, expo)
     return np.sum(_component_cdf(np.asarray(count, float)[..., None], rates, dispersion)
-                  * WEIGHTS, -1) / np.sqrt(np.pi)
+                  * _quadrature(var)[1], -1) / np.sqrt(np.pi)
 
 
 def quantile(q: float, mean, var, expo, dispersion: Optional[float] = None):
@@ -78,12 +86,13 @@ def quantile(q: float, mean, var, expo, dispersion: Optional[float] = None):
     for start in range(0, flat_out.size, CHUNK):
         part = slice(start, start + CHUNK)
         rates = _rates(flat[0][part], flat[1][part], flat[2][part])
+        weights = _quadrature(flat[1][part])[1]
         ppf = _component_ppf(q, rates, dispersion)
         low = np.min(ppf, axis=1) - 1.0           # P(N <= low) < q
         high = np.max(ppf, axis=1)                # P(N <= high) >= q
         while np.any(high - low > 1):
             mid = np.floor((low + high) / 2.0)
-            ok = np.sum(_component_cdf(mid[:, None], rates, dispersion) * WEIGHTS, -1) \
+            ok = np.sum(_component_cdf(mid[:, None], rates, dispersion) * weights, -1) \
                 / np.sqrt(np.pi) >= q - 1e-12
             high = np.where(ok, mid, high)
             low = np.where(ok, low, mid)

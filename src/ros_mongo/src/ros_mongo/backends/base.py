@@ -35,8 +35,8 @@ from ros_mongo.query import Query
 from ros_mongo.records import MessageRecord, StoredMessage, TopicInfo, make_record, split_time
 from ros_mongo.urls import check_url, redact_url
 
-__all__ = ["MessageStore", "BLOB_THRESHOLD", "redact_url", "register_backend", "backend_for_url",
-           "registered_schemes"]
+__all__ = ["MessageStore", "PreparedRecords", "BLOB_THRESHOLD", "redact_url", "register_backend",
+           "backend_for_url", "registered_schemes"]
 
 #: Serialized messages larger than this go to attachments (CouchDB) or GridFS (MongoDB).
 BLOB_THRESHOLD = 256 * 1024
@@ -113,7 +113,30 @@ class MessageStore(abc.ABC):
         if not records:
             return 0
         self._ensure()
-        return self._insert(list(records))
+        return self.insert_prepared(self.prepare_records(records))
+
+    def prepare_records(self, records: Sequence[MessageRecord]) -> "PreparedRecords":
+        """The records encoded as this backend writes them, without any I/O (so a caller can
+        encode the next records on its thread while another thread writes: `insert_prepared`).
+        A record that cannot be encoded at all is kept as an error, reported by `insert_prepared`."""
+        prepared = PreparedRecords(len(records))
+        for record in records:
+            try:
+                item, weight = self._batch_item(record)
+            except (StoreUnavailable, StoreRefused):
+                raise
+            except StoreError as err:  # cannot be encoded at all: invalid on its own merits
+                prepared.errors.append(f"{record.id}: {err}")
+                continue
+            prepared.items.append((item, record.id, weight))
+        return prepared
+
+    def insert_prepared(self, prepared: "PreparedRecords") -> int:
+        """`insert_records` for records `prepare_records` encoded (same contract)."""
+        if not prepared.records:
+            return 0
+        self._ensure()
+        return self._insert(prepared)
 
     def put_topic(self, info: TopicInfo) -> None:
         """Keep a topic's definition and latching (once per topic, type and md5sum)."""
@@ -191,32 +214,25 @@ class MessageStore(abc.ABC):
         an admin URL."""
         return True
 
-    def _insert(self, records: List[MessageRecord]) -> int:
-        """Write records in batches of at most `batch_docs` documents and about `batch_bytes`.
+    def _insert(self, prepared: "PreparedRecords") -> int:
+        """Write prepared records in batches of at most `batch_docs` documents and about `batch_bytes`.
 
         A batch refused as a whole because of one document (BatchTooLarge) is split until that
         document is alone; documents refused on their own merits are collected and reported
         together, after every other document was stored, as one DocumentsRejected naming them.
         StoreUnavailable / StoreRefused pass through (nothing is lost: ids dedupe the retry)."""
-        stored, errors, batch, size = 0, [], [], 0
-        for record in records:
-            try:
-                item, weight = self._batch_item(record)
-            except (StoreUnavailable, StoreRefused):
-                raise
-            except StoreError as err:  # cannot be encoded at all: invalid on its own merits
-                errors.append(f"{record.id}: {err}")
-                continue
+        stored, errors, batch, size = 0, list(prepared.errors), [], 0
+        for item, record_id, weight in prepared.items:
             if batch and (len(batch) >= self.batch_docs or size + weight > self.batch_bytes):
                 stored += self._write_split(batch, errors)
                 batch, size = [], 0
-            batch.append((item, record.id))
+            batch.append((item, record_id))
             size += weight
         if batch:
             stored += self._write_split(batch, errors)
         if errors:
             ids = frozenset(e.split(":", 1)[0] for e in errors)
-            raise DocumentsRejected(f"{self.backend_title} rejected {len(errors)} of {len(records)} "
+            raise DocumentsRejected(f"{self.backend_title} rejected {len(errors)} of {prepared.records} "
                                     f"documents, first: {errors[0]}", len(errors), ids)
         return stored
 
@@ -239,7 +255,8 @@ class MessageStore(abc.ABC):
 
     @abc.abstractmethod
     def _batch_item(self, record: MessageRecord) -> Tuple[object, int]:
-        """What a batch holds for `record`, and how many bytes it adds to the batch."""
+        """What a batch holds for `record`, and how many bytes it adds to the batch (encoding
+        only, no I/O: `_write_batch` does the writing)."""
 
     @abc.abstractmethod
     def _write_batch(self, batch: list, errors: list) -> int:
@@ -284,6 +301,19 @@ class MessageStore(abc.ABC):
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.url!r})"
+
+
+class PreparedRecords:
+    """Records encoded for one backend (`MessageStore.prepare_records`): `items` (backend item,
+    record id, bytes it weighs), `errors` ("<id>: <reason>" of records that cannot be encoded) and
+    how many `records` were given."""
+
+    __slots__ = ("items", "errors", "records")
+
+    def __init__(self, records: int):
+        self.items: List[Tuple[object, str, int]] = []
+        self.errors: List[str] = []
+        self.records = records
 
 
 def _serialize(msg) -> bytes:

@@ -532,9 +532,13 @@ def _take(items: Iterator[dict], limit: int) -> Iterator[dict]:
         yield item
 
 
+_ENCODER = json.JSONEncoder(separators=(",", ":"), allow_nan=False)  # made once: json.dumps with
+# options builds a new encoder per call
+
+
 def _dumps(doc: dict) -> Optional[bytes]:
     try:
-        return json.dumps(doc, separators=(",", ":"), allow_nan=False).encode("utf-8")
+        return _ENCODER.encode(doc).encode("utf-8")
     except (ValueError, TypeError):
         return None
 

@@ -152,31 +152,37 @@ class MongoStore(MessageStore):
         self.client.close()
 
     # -- writing -----------------------------------------------------------------------------
-    def _batch_item(self, record: MessageRecord) -> Tuple[dict, int]:
-        doc = self._document(record)
-        return doc, len(record.raw) if "raw" in doc else 0
-
-    def _document(self, record: MessageRecord) -> dict:
+    def _batch_item(self, record: MessageRecord) -> Tuple[Tuple[dict, Optional[bytes]], int]:
+        """(document, bytes for GridFS or None), and the bytes the document holds."""
         doc = message_doc(record)
         if len(record.raw) > self.blob_threshold:
-            self._put_blob(record.id, record.raw)
             doc["blob"] = True
             if len(bson.encode(doc)) > MAX_BSON_BYTES:
                 doc["msg"], doc["fields_dropped"] = None, True
-        else:
-            doc["raw"] = Binary(record.raw)
-        return doc
+            return (doc, record.raw), 0
+        doc["raw"] = Binary(record.raw)
+        return (doc, None), len(record.raw)
 
-    def _put_blob(self, message_id: str, raw: bytes) -> None:
+    def _put_blobs(self, blobs: List[Tuple[str, bytes]]) -> None:
+        """GridFS files for the messages not stored there yet (one lookup for them all; chunks of
+        a torn earlier attempt are removed first), before their documents are inserted."""
         def put() -> None:
-            if self.db["blobs.files"].find_one({"_id": message_id}, {"_id": 1}) is not None:
-                return  # stored by an earlier attempt
-            self.db["blobs.chunks"].delete_many({"files_id": message_id})  # a torn earlier attempt
-            self.blobs.upload_from_stream_with_id(message_id, message_id, raw)
+            ids = [message_id for message_id, _ in blobs]
+            present = {doc["_id"] for doc in self.db["blobs.files"].find({"_id": {"$in": ids}}, {"_id": 1})}
+            missing = [(message_id, raw) for message_id, raw in blobs if message_id not in present]
+            if not missing:
+                return
+            self.db["blobs.chunks"].delete_many({"files_id": {"$in": [m for m, _ in missing]}})
+            for message_id, raw in missing:
+                self.blobs.upload_from_stream_with_id(message_id, message_id, raw)
         self._call("store message bytes in GridFS", put)
 
-    def _write_batch(self, docs: List[dict], errors: list) -> int:
+    def _write_batch(self, items: List[Tuple[dict, Optional[bytes]]], errors: list) -> int:
         self._indexes_once()
+        blobs = [(doc["_id"], raw) for doc, raw in items if raw is not None]
+        if blobs:
+            self._put_blobs(blobs)
+        docs = [doc for doc, _ in items]
 
         def insert() -> int:
             try:
