@@ -192,26 +192,6 @@ def test_replay_fixed_rate_loop_and_stop(replay_store):
 
 
 @pytest.mark.db
-def test_replay_prepares_each_message_before_publishing_it(replay_store):
-    prepared, got = [], []
-
-    def prepare(item):
-        prepared.append(item.receive_time)
-        item.prepared = b"ready:" + bytes(item.raw)
-
-    def publish(item):
-        got.append((item.receive_time, len(prepared), item.prepared, bytes(item.raw)))
-
-    replayer = Replayer(replay_store, publish, prepare=prepare, rate=100.0)
-    replayer.start(parse_query("topic /chatter"))
-    assert replayer.wait(60) and replayer.state == "finished"
-    assert prepared == [100.0 + i for i in range(20)]
-    for index, (stamp, prepared_so_far, ready, raw) in enumerate(got):
-        assert stamp == 100.0 + index and prepared_so_far > index  # prepared before its turn
-        assert raw == serialized(String(data=f"m{index}")) and ready == b"ready:" + raw
-
-
-@pytest.mark.db
 def test_replay_of_nothing_finishes(replay_store):
     replayer = Replayer(replay_store, lambda m: None)
     replayer.start(parse_query("topic /nothing"))

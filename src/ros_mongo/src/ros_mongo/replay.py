@@ -38,15 +38,13 @@ _END = "end"
 
 
 class ReplayItem:
-    """One message to replay: topic, msg_type, md5sum, receive_stamp (genpy.Time), raw bytes, and
-    `prepared`: whatever the Replayer's `prepare` callback made of it ahead of time (or None)."""
+    """One message to replay: topic, msg_type, md5sum, receive_stamp (genpy.Time), raw bytes."""
 
-    __slots__ = ("topic", "msg_type", "md5sum", "receive_stamp", "raw", "prepared")
+    __slots__ = ("topic", "msg_type", "md5sum", "receive_stamp", "raw")
 
     def __init__(self, topic: str, msg_type: str, md5sum: str, secs: int, nsecs: int, raw: bytes):
         self.topic, self.msg_type, self.md5sum, self.raw = topic, msg_type, md5sum, raw
         self.receive_stamp = genpy.Time(secs, nsecs)
-        self.prepared = None
 
     @property
     def receive_time(self) -> float:
@@ -67,16 +65,13 @@ class Replayer:
         preroll_timeout: longest wait for the read-ahead to fill before playing.
         lane_min_bytes: messages at least this large are published by a thread of their topic's
             own at their due time (writing them then never delays other topics).
-        prepare: called with each ReplayItem as it is read ahead (on the loading thread, before
-            its due time), e.g. to build what `publish` sends, so that work stays off the timed path.
     """
 
     def __init__(self, store: MessageStore, publish: Callable[[ReplayItem], None], *,
                  clock: Optional[Callable[[genpy.Time], None]] = None, rate: float = 1.0,
                  start_offset: float = 0.0, duration: float = 0.0, loop: bool = False,
                  fixed_rate: float = 0.0, clock_period: float = 0.01, prefetch: int = 100000,
-                 prefetch_mb: float = 1024.0, preroll_timeout: float = 15.0, lane_min_bytes: int = 65536,
-                 prepare: Optional[Callable[[ReplayItem], None]] = None):
+                 prefetch_mb: float = 1024.0, preroll_timeout: float = 15.0, lane_min_bytes: int = 65536):
         for name, value in (("rate", rate), ("clock_period", clock_period)):
             if not value > 0:
                 raise ValueError(f"{name} must be positive, got {value!r}")
@@ -90,7 +85,6 @@ class Replayer:
         self.prefetch, self.prefetch_bytes = max(2, int(prefetch)), max(1, int(prefetch_mb * 2 ** 20))
         self.preroll_timeout = float(preroll_timeout)
         self.lane_bytes = int(lane_min_bytes)
-        self.prepare = prepare
         self.published = 0
         self._count_lock = threading.Lock()
         self._late: List[float] = []
@@ -149,7 +143,7 @@ class Replayer:
 
     def _play(self, window: Query) -> None:
         buffer = _Buffer(self.prefetch, self.prefetch_bytes, self._stop)
-        loader = _LoaderProcess(self.store, window, buffer, self.prepare)
+        loader = _LoaderProcess(self.store, window, buffer)
         began = time.monotonic()
         buffer.wait_filled(loader.receiver, timeout=self.preroll_timeout)  # preroll
         prerolled, self._late = time.monotonic() - began, []
@@ -205,10 +199,7 @@ class Replayer:
 def _sleep_until(due: float, stop: threading.Event, tick: Optional[Callable[[], None]] = None,
                  tick_period: float = 0.01) -> bool:
     """Sleep until `due`, spinning through its last fraction of a millisecond and calling `tick`
-    every `tick_period` meanwhile; False if `stop` was set. The spin gives the interpreter lock
-    away on every turn (`sleep(0)`), so a thread spinning towards its message never holds up
-    another thread's message that is due first (holding it, a spinner keeps it for up to the
-    switch interval)."""
+    every `tick_period` meanwhile; False if `stop` was set."""
     while True:
         remaining = due - time.monotonic()
         if remaining <= 0:
@@ -221,8 +212,6 @@ def _sleep_until(due: float, stop: threading.Event, tick: Optional[Callable[[], 
                 step = min(step, tick_period)
                 tick()
             time.sleep(min(step, 0.1))
-        else:
-            time.sleep(0)
 
 
 class _Lane:
@@ -262,10 +251,8 @@ class _LoaderProcess:
     """`python -m ros_mongo.loader` reading `window`; a receiver thread moves its chunks of message
     tuples into the player's buffer."""
 
-    def __init__(self, store: MessageStore, window: Query, buffer: "_Buffer",
-                 prepare: Optional[Callable[[ReplayItem], None]] = None):
+    def __init__(self, store: MessageStore, window: Query, buffer: "_Buffer"):
         url, options = store.reopen_args()
-        self.prepare = prepare
         self.process = subprocess.Popen([sys.executable, "-m", "ros_mongo.loader"], stdin=subprocess.PIPE,
                                         stdout=subprocess.PIPE)
         pickle.dump((url, options, window), self.process.stdin)  # credentials go through the pipe only
@@ -285,14 +272,7 @@ class _LoaderProcess:
                 return
             if kind == "data":
                 for fields in payload:
-                    item = ReplayItem(*fields)
-                    if self.prepare is not None:
-                        try:
-                            self.prepare(item)
-                        except Exception:  # noqa: BLE001 - published unprepared, never lost
-                            log.exception("preparing a %s message failed", item.topic)
-                            item.prepared = None
-                    if not self.buffer.put(item, len(fields[-1])):
+                    if not self.buffer.put(ReplayItem(*fields), len(fields[-1])):
                         return
             else:
                 self.buffer.put(_END if kind == _END else StoreError(payload))

@@ -3,7 +3,6 @@
 Its parameters are `RetrieverConfig` (config/ros_mongo_retriever.yaml is generated from it).
 """
 import json
-import struct
 import sys
 import threading
 import time
@@ -114,7 +113,7 @@ class RetrieverNode:
             loop=config.loop, fixed_rate=config.fixed_rate,
             clock_period=1.0 / config.clock_rate, prefetch=config.prefetch,
             prefetch_mb=config.prefetch_mb, preroll_timeout=config.preroll_timeout,
-            lane_min_bytes=config.lane_min_bytes, prepare=_frame)
+            lane_min_bytes=config.lane_min_bytes)
 
     def setup(self) -> "RetrieverNode":
         rospy.Service("~count", Count, self._count)
@@ -181,12 +180,9 @@ class RetrieverNode:
             rospy.logwarn_throttle(10, f"skipping {stored.topic} message of type {stored.msg_type}: "
                                        f"no publisher for it")
             return
-        publisher = entry[1]
-        if stored.prepared is not None and _write_framed(publisher, stored.prepared, stored.raw):
-            return
-        message = publisher.data_class()
+        message = entry[1].data_class()
         message._buff = stored.raw
-        publisher.publish(message)
+        entry[1].publish(message)
 
     def _clock(self, stamp) -> None:
         self.clock_pub.publish(Clock(clock=stamp))
@@ -233,60 +229,6 @@ class RetrieverNode:
     def shutdown(self) -> None:
         self.replayer.stop()
         self.store.close()
-
-
-def _frame(item: ReplayItem) -> None:
-    """What TCPROS sends for a message (its 4-byte length, then its bytes), built while reading
-    ahead, so publishing is one socket write per subscriber without copying (see _write_framed).
-    The item's `raw` becomes a view into it (the bytes are held once)."""
-    framed = struct.pack("<I", len(item.raw)) + item.raw
-    item.prepared = framed
-    item.raw = memoryview(framed)[4:]
-
-
-def _write_framed(publisher: rospy.Publisher, framed: bytes, raw: bytes) -> bool:
-    """Publish a message already framed for TCPROS: what rospy's `Publisher.publish` does for a
-    message whose bytes are given (rospy.AnyMsg: no header to stamp), without its two copies of
-    the bytes (into the publisher's buffer, then out of it), which for a 900 KB image held the
-    interpreter for a few hundred microseconds and delayed the other topics' messages. False (and
-    nothing sent) when this rospy's publisher does not look as expected: publish the usual way."""
-    impl = publisher.impl
-    if impl is None or not all(hasattr(impl, name) for name in _PUBLISHER_IMPL):
-        return False
-    failed = []
-    impl.acquire()
-    try:
-        if impl.closed:
-            if rospy.is_shutdown():
-                return True
-            raise rospy.ROSException("publish() to a closed topic")
-        if impl.is_latch:  # new subscribers get the latched message serialized the usual way
-            latched = publisher.data_class()
-            latched._buff = raw
-            impl.latch = latched
-        if not impl.has_connections():
-            return True
-        impl.seq += 1
-        for connection in impl.connections:
-            if rospy.is_shutdown():
-                break
-            try:
-                connection.write_data(framed)
-            except Exception:  # noqa: BLE001 - as rospy: a failing connection is closed, others go on
-                failed.append(connection)
-        impl.message_data_sent += len(framed)
-    finally:
-        impl.release()
-    for connection in failed:
-        try:
-            connection.close()  # removes itself from the publisher
-        except Exception:  # noqa: BLE001 - as rospy
-            pass
-    return True
-
-
-_PUBLISHER_IMPL = ("acquire", "release", "closed", "is_latch", "latch", "has_connections", "seq",
-                   "connections", "message_data_sent")
 
 
 def raw_class(info: TopicInfo) -> type:
