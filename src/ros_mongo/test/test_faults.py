@@ -6,6 +6,7 @@ pouchdb-server, answering with the exact status and JSON bodies a real CouchDB 3
 (/work/shared/DATABASES.md), switched on and off while the real recorder node (roscore + roslaunch)
 runs. Expected values come from what the test published, never from the code under test.
 """
+import json
 import subprocess
 import threading
 import uuid
@@ -341,3 +342,24 @@ def test_a_full_spool_keeps_the_batches_in_memory_until_the_server_answers(couch
         assert counts["spool_pending"] == 0
         got = [m.message().data for m in store.find_messages(topic="/chatter")]
     assert got == [f"m{i}" for i in range(600)]
+
+
+@pytest.mark.db
+def test_the_proxy_forwards_chunked_request_bodies(proxy, couchdb_server):
+    """Node's HTTP client streams some bodies with Transfer-Encoding: chunked (no Content-Length);
+    the proxy must forward them whole, as CouchDB would read them."""
+    name = _names()
+    _admin_creates(couchdb_server, name)
+    docs = {"docs": [{"_id": f"chunked-{i}", "n": i} for i in range(50)]}
+
+    def pieces():  # a generator body: requests sends it chunked
+        text = json.dumps(docs).encode()
+        for start in range(0, len(text), 97):
+            yield text[start:start + 97]
+
+    answer = requests.post(f"{proxy.url}/{name}/_bulk_docs", data=pieces(), timeout=60,
+                           headers={"Content-Type": "application/json"})
+    assert answer.status_code == 201, answer.text
+    stored = requests.get(f"{couchdb_server.url}/{name}/_all_docs", params={"include_docs": "true"},
+                          timeout=30).json()["rows"]
+    assert sorted(row["doc"]["n"] for row in stored) == list(range(50))

@@ -207,7 +207,8 @@ class _Handler(BaseHTTPRequestHandler):
         target = urlsplit(self.upstream)
         connection = http.client.HTTPConnection(target.hostname, target.port, timeout=120)
         headers = {k: v for k, v in self.headers.items()
-                   if k.lower() not in ("host", "connection", "authorization", "content-length")}
+                   if k.lower() not in ("host", "connection", "authorization", "content-length",
+                                        "transfer-encoding")}  # the body goes on whole
         headers["Content-Length"] = str(len(body))
         try:
             connection.request(method, path, body=body, headers=headers)
