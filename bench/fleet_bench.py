@@ -9,17 +9,20 @@ s while the robots keep recording, then restarted; `--tail` s more. Run 2 (direc
 same robots' recorders write straight to the central server for `--duration` s.
 
 Figures: messages lost (published - central), central throughput (messages/s and MB/s stored
-centrally), lag = time a message becomes visible in the central `_changes` feed minus its receive
-time (same machine clock), p50/p99 in steady state (messages received after the first 5 s of run 1
-and before the partition), catch-up time = from the central restart until every message received
+centrally), lag = time a message is stored centrally (the central `update_seq` has reached its
+sequence: `CentralWatch`) minus its receive time on the robot (same machine clock), p50/p99 in
+steady state (messages received after the first 5 s of run 1 and more than CUT_GUARD = 10 s
+before the partition), whether replication kept up in the steady state (central arrivals /
+messages received there), catch-up time = from the central restart until every message received
 before it is central (faster than real time when below `--partition`), and the direct run's
-figures with ratios. Targets (issue 13): 0 lost, steady-state lag p99 < 5 s, catch-up < partition.
-Printed, written to artifacts/bench/fleet.json, plot artifacts/bench/fleet_lag.png.
+figures with ratios. Targets (issue 13): 0 lost, steady-state lag p99 < 5 s, catch-up <
+partition. Printed, written to artifacts/bench/fleet.json, plot artifacts/bench/fleet_lag.png.
 
     scripts/in_env.sh python bench/fleet_bench.py                 # 60 s + 60 s partition
     scripts/in_env.sh python bench/fleet_bench.py --quick         # 10 s + 10 s, a smoke run
 """
 import argparse
+import bisect
 import json
 import math
 import re
@@ -39,6 +42,11 @@ from ros_harness import LaunchSet, ManagedProcess, PouchDBServer, RosCore, wait_
 ROOT = Path(__file__).resolve().parents[1]
 RATES = {"/odom": 100.0, "/scan": 10.0, "/camera/rgb/image_raw": 5.0}
 TOPICS = "[/odom, /scan, /camera/rgb/image_raw]"
+#: Steady-state lag counts messages received from 5 s after the start until CUT_GUARD s before the
+#: central server is stopped: a message received later may be caught in flight by the cut and
+#: carry the partition in its lag. The guard drops a slice of time, not slow messages: one received
+#: earlier that still arrives after the cut is counted with its whole (partition-inflated) lag.
+CUT_GUARD = 10.0
 
 
 # -- the publisher (run as `fleet_bench.py --publish SECONDS` under a robot's roscore) ----------
@@ -59,11 +67,13 @@ def _samples():
     return {"/odom": odom, "/scan": scan, "/camera/rgb/image_raw": image}
 
 
-def publish(duration: float) -> int:
+def publish(duration: float, topics) -> int:
+    """Publish `topics` (all of RATES when empty) at their rates for `duration` s, once every
+    topic has a subscriber; prints the counts as a JSON line."""
     import rospy
 
     rospy.init_node("fleet_bench_publisher", disable_signals=True)
-    messages = _samples()
+    messages = {t: m for t, m in _samples().items() if not topics or t in topics}
     publishers = {t: rospy.Publisher(t, type(m), queue_size=200) for t, m in messages.items()}
     while min(p.get_num_connections() for p in publishers.values()) < 1:
         time.sleep(0.05)  # the condition: the recorder subscribed to every topic
@@ -108,44 +118,78 @@ MESSAGE_ID = re.compile(r"^(\d{19})-")  # message ids start with the receive tim
 
 
 class CentralWatch:
-    """Follows the central `_changes` feed: arrival time of every message document.
+    """Follows the central database: arrival time of every message document.
 
-    The feed is read without documents (the receive time is the first part of a message id),
-    so a busy central server answers it quickly and the arrival time is close to when central
-    stored the message; sizes are read once at the end (`sizes`)."""
+    Two readers: one samples the database's `update_seq` every 0.1 s (a cheap `GET /db`), the
+    other reads the `_changes` feed without documents (the receive time is the first part of a
+    message id) for each message's sequence number. A message's arrival time is the first
+    sample whose `update_seq` had reached its sequence, so it stays right even when the feed
+    reader falls behind a busy server (it was seen 10,000 changes behind). The feed is polled
+    (every 0.2 s while nothing is new) rather than held open as a long poll: a long poll sent to
+    pouchdb-server right after its restart was seen to stay open for minutes while documents
+    arrived. Sizes are read once at the end (`sizes`)."""
 
     def __init__(self, db_url: str):
         self.db_url = db_url
-        self.arrivals = {}  # id -> (arrival wall time, receive time)
+        self.seen = {}  # id -> (sequence number, receive time, time the feed reader saw it)
+        self.samples = []  # (wall time, update_seq), update_seq rising
         self.since = "0"
         self._stop = threading.Event()
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.thread.start()
+        self.threads = [threading.Thread(target=target, daemon=True)
+                        for target in (self._follow_feed, self._sample_sequence)]
+        for thread in self.threads:
+            thread.start()
 
-    def _run(self):
+    def _sample_sequence(self):
+        session = requests.Session()
+        while not self._stop.is_set():
+            try:
+                seq = _seq_number(session.get(self.db_url, timeout=30).json()["update_seq"])
+            except (requests.RequestException, ValueError, KeyError):
+                time.sleep(0.5)  # the central server is down: look again
+                continue
+            if not self.samples or seq > self.samples[-1][1]:
+                self.samples.append((time.time(), seq))
+            time.sleep(0.1)
+
+    def _follow_feed(self):
         session = requests.Session()
         while not self._stop.is_set():
             try:
                 answer = session.get(self.db_url + "/_changes", timeout=120, params={
-                    "since": self.since, "feed": "longpoll", "timeout": "5000",
-                    "limit": "5000"}).json()
+                    "since": self.since, "limit": "5000"}).json()
             except (requests.RequestException, ValueError):
                 time.sleep(0.5)  # the central server is down: look again
                 continue
+            if not answer.get("results"):
+                time.sleep(0.2)  # nothing new yet
             now = time.time()
             for change in answer.get("results", []):
                 match = MESSAGE_ID.match(change["id"])
-                if match and not change.get("deleted") and change["id"] not in self.arrivals:
-                    self.arrivals[change["id"]] = (now, int(match.group(1)) / 1e9)
+                if match and not change.get("deleted") and change["id"] not in self.seen:
+                    self.seen[change["id"]] = (_seq_number(change["seq"]),
+                                               int(match.group(1)) / 1e9, now)
             self.since = str(answer.get("last_seq", self.since))
 
+    @property
+    def arrivals(self) -> dict:
+        """{message id: (arrival wall time, receive time)}."""
+        times = [t for t, _ in self.samples]
+        seqs = [q for _, q in self.samples]
+        result = {}
+        for doc_id, (seq, received, read_at) in list(self.seen.items()):
+            index = bisect.bisect_left(seqs, seq)
+            result[doc_id] = (min(times[index], read_at) if index < len(times) else read_at, received)
+        return result
+
     def count(self) -> int:
-        return len(self.arrivals)
+        return len(self.seen)
 
     def stop(self):
-        """Stop following (a long poll with nothing new may stay open: the thread is a daemon)."""
+        """Stop both readers (daemon threads: a request in flight does not hold the run)."""
         self._stop.set()
-        self.thread.join(timeout=10)
+        for thread in self.threads:
+            thread.join(timeout=10)
 
     def sizes(self) -> dict:
         """{message id: stored bytes} of every central message (read once, after the run)."""
@@ -162,6 +206,11 @@ class CentralWatch:
             if len(rows) <= 1000:
                 return found
             start = rows[1000]["id"]
+
+
+def _seq_number(seq) -> int:
+    """A change sequence as a number (pouchdb-server: an integer; CouchDB: "<n>-<opaque>")."""
+    return int(str(seq).split("-", 1)[0])
 
 
 def local_messages(db_url: str) -> int:
@@ -195,8 +244,10 @@ class Robot:
                       robot_id=self.robot_id, topics=_yaml_list(topics),
                       spool_path=str(self.work / "spool_direct"))
 
-    def publish(self, duration):
-        self.publisher = ManagedProcess([sys.executable, __file__, "--publish", duration],
+    def publish(self, duration, topics=()):
+        """Start the publisher: `topics` (default all) for `duration` s."""
+        self.publisher = ManagedProcess([sys.executable, __file__, "--publish", duration,
+                                         "--publish-topics", *topics],
                                         name=f"publisher {self.robot_id}",
                                         log_path=self.work / f"publisher_{time.time_ns()}.log",
                                         env=self.core.env()).start()
@@ -266,7 +317,9 @@ def run_replicated(work: Path, robots_n: int, duration: float, partition: float,
         _drain(watch, published, "draining")
         sizes = watch.sizes()
         arrivals = [(a, r, sizes.get(i, 0)) for i, (a, r) in list(watch.arrivals.items())]
-        steady = [a - r for a, r, _ in arrivals if t0 + 5 <= r < t_cut]
+        steady = [a - r for a, r, _ in arrivals if t0 + 5 <= r < t_cut - CUT_GUARD]
+        steady_arrivals = sum(1 for a, *_ in arrivals if t0 + 5 <= a < t_cut)
+        steady_received = sum(1 for _, r, _ in arrivals if t0 + 5 <= r < t_cut)
         before_heal = [a for a, r, _ in arrivals if r < t_heal]
         catch_up = max(before_heal) - t_heal if before_heal else None
         window = [(a, s) for a, r, s in arrivals if t_heal <= a <= t_heal + (catch_up or 0)]
@@ -275,7 +328,9 @@ def run_replicated(work: Path, robots_n: int, duration: float, partition: float,
         result = {
             "published": published, "central": stored, "lost": published - stored,
             "local": sum(local_messages(r.url) for r in robots),
-            "steady_lag_s": _percentiles(steady),
+            "steady_lag_s": _percentiles(steady), "cut_guard_s": CUT_GUARD,
+            # central arrivals / messages received in the steady state: below 1, a backlog grows
+            "steady_keeping_up": steady_arrivals / steady_received if steady_received else None,
             "catch_up_s": catch_up, "partition_s": partition,
             "catch_up_rate_msgs_per_s": len(window) / catch_up if catch_up else None,
             "catch_up_mb_per_s": sum(s for _, s in window) / 2 ** 20 / catch_up if catch_up else None,
@@ -311,8 +366,8 @@ def run_direct(work: Path, robots_n: int, duration: float, local_topics=()):
         for robot in robots:
             robot.start_direct(central_url)  # the recorders create the database
         watch = CentralWatch(central_url)
-        for robot in robots:
-            robot.publish(duration)
+        for robot in robots:  # nobody subscribes to a local topic in this run
+            robot.publish(duration, [t for t in RATES if t not in local_topics])
         t0 = time.time()
         wait_until(lambda: not any(r.publisher.alive for r in robots), duration + 600,
                    what="publishers done")
@@ -342,6 +397,8 @@ def plot(result, output: Path):
             label="replicated: central arrival - receive time")
     ax.axvspan(result["replicated"]["cut_at"], result["replicated"]["heal_at"], color="0.85",
                label="central server down")
+    ax.axvspan(result["replicated"]["cut_at"] - CUT_GUARD, result["replicated"]["cut_at"],
+               color="0.93", label="not in the steady-state figures (guard)")
     ax.set_xlabel("seconds since the robots started publishing")
     ax.set_ylabel("lag (s)")
     kept = f"; kept local: {', '.join(result['local_topics'])}" if result["local_topics"] else ""
@@ -354,6 +411,7 @@ def plot(result, output: Path):
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--publish", type=float, help=argparse.SUPPRESS)
+    parser.add_argument("--publish-topics", nargs="*", default=[], help=argparse.SUPPRESS)
     parser.add_argument("--quick", action="store_true", help="10 s steady + 10 s partition")
     parser.add_argument("--duration", type=float, help="steady-state seconds (default 60)")
     parser.add_argument("--partition", type=float, help="seconds the central server is down (60)")
@@ -365,7 +423,7 @@ def main() -> int:
     parser.add_argument("--output", type=Path, default=ROOT / "artifacts" / "bench")
     args, _ = parser.parse_known_args()
     if args.publish is not None:
-        return publish(args.publish)
+        return publish(args.publish, args.publish_topics)
     duration = args.duration or (10.0 if args.quick else 60.0)
     partition = args.partition or (10.0 if args.quick else 60.0)
     args.output.mkdir(parents=True, exist_ok=True)

@@ -7,7 +7,9 @@ synthetic expert (sanity), with CIOC (Levine and Koltun 2012).
    (lfd_controller.demonstrators; they do not optimise our features), a reward learned with
    learning.fit_person_reward (LinearCIOC over person_features(), sign prior PERSON_SIGNS, 4 s
    windows from the recorded states, Gauss-Newton Hessian, learned command noise), driven by the
-   receding-horizon controller (learning.PERSON_CONTROLLER: 8 s look-ahead, detour seeds) on
+   receding-horizon controller (learning.PERSON_CONTROLLER: up to 8 s look-ahead, ending about
+   at arrival at the reward's preferred speed (at least 3.2 s), detour seeds, one alternative seed
+   per cycle, discount 0.97 per step; cycle budget 100 ms) on
    held-out starts (100; --quick 10) with planner.CollisionBarrier (a fixed, not learned, penalty
    inside robot + obstacle radius + 0.1 m) added to the learned reward; behaviour cloning tuned
    on validation starts (size, L2 regularisation, three initialisations; clean + DART
@@ -305,9 +307,14 @@ def people(args, results):
     if cycle_times:
         cycle = np.array(cycle_times) * 1000.0
         results.setdefault("cost", {}).update(people_cycle_ms_mean=float(cycle.mean()),
-                                              people_cycle_ms_p95=float(np.percentile(cycle, 95)))
-        print(f"  controller cycle (person rewards): mean {cycle.mean():.1f} ms, p95 "
-              f"{np.percentile(cycle, 95):.1f} ms (budget 100 ms)", flush=True)
+                                              people_cycle_ms_p95=float(np.percentile(cycle, 95)),
+                                              people_cycle_ms_p99=float(np.percentile(cycle, 99)),
+                                              people_cycle_ms_max=float(cycle.max()),
+                                              people_cycle_over_100ms=float(np.mean(cycle > 100.0)),
+                                              people_cycles=int(len(cycle)))
+        print(f"  controller cycle (person rewards, {len(cycle)} cycles): mean {cycle.mean():.1f} ms, "
+              f"p95 {np.percentile(cycle, 95):.1f} ms, p99 {np.percentile(cycle, 99):.1f} ms, max "
+              f"{cycle.max():.1f} ms, {np.mean(cycle > 100.0):.1%} over the 100 ms budget", flush=True)
     plot_people(rows)
     if not args.quick or args.learn_time:
         scenario = load_scenario("static_obstacle")

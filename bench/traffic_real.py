@@ -7,10 +7,11 @@ Each sensor is a place on a local metric grid (WGS 84 projected to metres around
 two counters of one site, EW and NS, 5 m apart); a row is (x, y, hour of week, exposure 1 hour,
 count). Protocol (every method gets the same rows):
   - choices (the GP's likelihood, negative binomial or Poisson, by held-out log density of the
-    daily model at the screening size; then its daily or weekly kernel by the RMSE of the
-    forecast with the last-week level; every baseline's setting; every forecaster's interval
-    spread) are made by fitting on 2019-01-07 .. 2019-10-27 and scoring 2019-10-28 ..
-    2019-12-22 (validation);
+    daily model at the screening size; then its offset, a per-place rate profile by time bin
+    (`TrafficGP(profile=...)`: "weekly", "daytype" or "none") and its daily or weekly kernel,
+    among the `--profiles` x `--kernels` candidates, by the RMSE of the forecast with the
+    last-week level; every baseline's setting; every forecaster's interval spread) are made
+    by fitting on 2019-01-07 .. 2019-10-27 and scoring 2019-10-28 .. 2019-12-22 (validation);
   - the chosen settings are refitted on 2019-01-07 .. 2019-12-22 (training);
   - test: 2020-01-06 .. 2020-06-28, never used for a choice; it holds the COVID-19 lockdown, where
     the counts collapse to a tenth (from 2020-03-23) and recover (May - June).
@@ -33,6 +34,7 @@ GP trained to the maximum step count without early stopping (its ELBO trace and 
 Writes artifacts/bench/traffic_real.json and artifacts/bench/traffic_real_*.png.
 
   python bench/traffic_real.py [--quick] [--steps N] [--inducing N] [--convergence]
+      [--profiles weekly[,daytype,none,weekly:20]] [--kernels daily[,weekly]]
 """
 import argparse
 import sys
@@ -239,8 +241,12 @@ def predict_rows(model, part) -> np.ndarray:
     return model.predict(part["x"], part["y"], part["t"])
 
 
-def gp_model(args, likelihood, weekly, **extra) -> TrafficGP:
+def gp_model(args, likelihood, weekly, profile="none", **extra) -> TrafficGP:
+    """The GP of this benchmark; `profile` is "none", a kind ("weekly") or a kind and the
+    profile's prior exposure in rows ("weekly:20")."""
+    kind, _, prior = profile.partition(":")
     settings = dict(n_inducing=args.inducing, hourly=False, weekly=weekly, likelihood=likelihood,
+                    profile=kind, profile_prior_exposure=float(prior or 1.0),
                     spatial_lengthscale=30.0, batch_size=512 if args.quick else 1024,
                     n_steps=args.steps, eval_every=25 if args.quick else 50,
                     random_state=0, progress=False)
@@ -290,6 +296,12 @@ def main(argv=None) -> int:
     parser.add_argument("--convergence", action="store_true",
                         help="also train the final GP to the maximum step count without early "
                              "stopping (one more fit: RMSE there against the early-stopped one)")
+    parser.add_argument("--profiles", default="weekly",
+                        help="the GP's offset candidates, chosen on validation: comma-separated "
+                             "from none, daily, daytype, weekly, each optionally with the "
+                             "profile's prior exposure in rows (weekly:20; default 1)")
+    parser.add_argument("--kernels", default="daily",
+                        help="the GP's kernel candidates, chosen on validation: daily, weekly")
     args = parser.parse_args(argv)
     args.steps = args.steps or (400 if args.quick else 1500)
     args.inducing = args.inducing or (150 if args.quick else 400)
@@ -308,9 +320,9 @@ def main(argv=None) -> int:
     val_hist = recent({k: np.concatenate([fit[k], val[k]]) for k in fit}, VALIDATION[0])
     gp_val, gp_fitted = {}, {}
 
-    def validate(key, likelihood, weekly, **extra):
+    def validate(key, likelihood, weekly, profile="none", **extra):
         began = time.perf_counter()
-        model = gp_model(args, likelihood, weekly, **extra).fit(as_obs(fit))
+        model = gp_model(args, likelihood, weekly, profile, **extra).fit(as_obs(fit))
         mean, var = model.predict_latent(val["x"], val["y"], val["t"])
         factor = rolling_factors(val_hist, gp_expected(model, val_hist), val, VALIDATION[0])
         expected = predictive.expected_value(mean, var)
@@ -341,11 +353,14 @@ def main(argv=None) -> int:
                          key=lambda lk: gp_val[f"{lk} daily (screening size)"]["nlpd"])
     else:
         likelihood = args.likelihood
-    for weekly in (False, True):
-        validate(f"{likelihood} {'weekly' if weekly else 'daily'}", likelihood, weekly)
-    weekly = (gp_val[f"{likelihood} weekly"]["rmse_level"]
-              < gp_val[f"{likelihood} daily"]["rmse_level"])
-    gp_key = f"{likelihood} {'weekly' if weekly else 'daily'}"
+    candidates = {}
+    for profile in args.profiles.split(","):
+        for kernel in args.kernels.split(","):
+            key = f"{likelihood} {kernel}, profile {profile}"
+            candidates[key] = (kernel == "weekly", profile)
+            validate(key, likelihood, kernel == "weekly", profile)
+    gp_key = min(candidates, key=lambda k: gp_val[k]["rmse_level"])
+    weekly, gp_profile = candidates[gp_key]
     print(f"  validation chooses the GP's {gp_key} model", flush=True)
 
     # the level's variance and the dispersion of every forecaster's intervals, on validation
@@ -408,7 +423,7 @@ def main(argv=None) -> int:
         calibration["seasonal_naive"], test["count"], log_naive, 0.0, 1.0, rng,
         (long_hist, seasonal_naive(history, long_hist, profile), test, TEST[0]))
     began = time.perf_counter()
-    gp = gp_model(args, likelihood, weekly).fit(as_obs(train))
+    gp = gp_model(args, likelihood, weekly, gp_profile).fit(as_obs(train))
     gp_seconds = time.perf_counter() - began
     print(f"  final GP: {gp.n_steps_} steps (best {gp.best_step_}) in {gp_seconds:.0f} s "
           f"({gp.train_seconds_:.0f} s training)", flush=True)
@@ -447,7 +462,8 @@ def main(argv=None) -> int:
     # ---- convergence: the same GP to the maximum step count without early stopping ----------
     full, full_rmse = None, None
     if args.convergence:
-        full = gp_model(args, likelihood, weekly, validation_fraction=0.0).fit(as_obs(train))
+        full = gp_model(args, likelihood, weekly, gp_profile,
+                        validation_fraction=0.0).fit(as_obs(train))
         full_rmse = rmse(full.predict(test["x"], test["y"], test["t"]), test["count"])
 
     print("\nRMSE of the counts on the test weeks (people per sensor-hour):")
@@ -506,7 +522,8 @@ def main(argv=None) -> int:
         "periods": {"fit": FIT, "validation": VALIDATION, "train": TRAIN, "test": TEST,
                     "lockdown": LOCKDOWN},
         "settings": {"steps": args.steps, "inducing": args.inducing, "quick": args.quick,
-                     "likelihood": args.likelihood},
+                     "likelihood": args.likelihood, "profiles": args.profiles,
+                     "kernels": args.kernels},
         "validation": {"baselines": table, "chosen": {k: str(v[0]) for k, v in best.items()},
                        "gp": gp_val, "interval_calibration": calibration},
         "gp": {"model": gp_key, "dispersion": gp.dispersion_,

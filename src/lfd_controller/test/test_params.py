@@ -36,7 +36,8 @@ def test_controller_config_builds_the_limits_and_the_planner_options():
     config = RewardControllerConfig.from_mapping({"reward_file": "r.yaml", "v_max": 1})
     assert config.limits() == UnicycleLimits(v_max=1.0)
     assert config.controller_options() == {"horizon": 20, "plan_dt": 0.2, "terminal": 10.0,
-                                           "max_iter": 15, "detour": 0.0}
+                                           "max_iter": 15, "detour": 0.0, "spread_seeds": False,
+                                           "discount": 1.0, "min_horizon": 0}
     with pytest.raises(ConfigError, match="rate"):
         RewardControllerConfig.from_mapping({"rate": 0.0})
     with pytest.raises(ModelError, match="w_max"):
@@ -75,8 +76,9 @@ def test_a_person_reward_carries_the_controller_settings_it_is_driven_with(tmp_p
     config = RewardControllerConfig.from_mapping({"reward_file": str(person)})
     driven = config.with_reward_settings(controller_settings(person))
     # the person driving settings documented in src/lfd_controller/README.md
-    assert (driven.horizon, driven.plan_dt, driven.terminal, driven.detour, driven.collision_margin) == (
-        20, 0.4, 0.0, 0.8, 0.1)
+    assert (driven.horizon, driven.plan_dt, driven.terminal, driven.detour, driven.spread_seeds,
+            driven.discount, driven.min_horizon, driven.collision_margin) == \
+        (20, 0.4, 0.0, 0.8, True, 0.97, 8, 0.1)
     assert driven.rate == config.rate and driven.max_iter == config.max_iter
     assert controller_settings(linear) == {}
     assert config.with_reward_settings(controller_settings(linear)) == config
@@ -86,3 +88,9 @@ def test_a_person_reward_carries_the_controller_settings_it_is_driven_with(tmp_p
         config.with_reward_settings({"rate": 50.0})
     with pytest.raises(ConfigError, match="detour"):
         config.with_reward_settings({"detour": -1.0})
+    with pytest.raises(ConfigError, match="discount"):
+        config.with_reward_settings({"discount": 1.5})
+    with pytest.raises(ConfigError, match="min_horizon"):
+        config.with_reward_settings({"min_horizon": 21})     # above ~horizon (20)
+    with pytest.raises(ConfigError, match="min_horizon"):
+        RewardControllerConfig.from_mapping({"min_horizon": 1})

@@ -253,3 +253,111 @@ class FeatureSet:
             control = np.column_stack([control, actions[:, 0]])
         return FeatureValues(np.stack([jet.val for jet in jets], axis=1), state_jac, state_hess,
                              control, control_jac, control_hess)
+
+    def weighted_first_order(self, states, actions, times, task: Task, state_weights,
+                             control_weights, obstacles: Optional[np.ndarray] = None):
+        """(w_s . phi + w_c . psi (T,), its gradient in the state (T, 5) and in the action (T, 2)):
+        what planning needs from a linear reward, written out by hand (no jets; features whose
+        weight is 0 are skipped). `evaluate` is the reference it is tested against.
+        `obstacles` (T, 2): the obstacle's positions at `times` when the caller has them."""
+        states = np.atleast_2d(np.asarray(states, float))
+        actions = np.atleast_2d(np.asarray(actions, float))
+        times = np.atleast_1d(np.asarray(times, float))
+        if obstacles is None:
+            obstacles = np.asarray(task.obstacle_position(times), float).reshape(-1, 2)
+        weights = dict(zip(self.state_names, np.asarray(state_weights, float)))
+        value, grad = _weighted_state_features(self, weights, states, times, task, obstacles)
+        control_weights = np.asarray(control_weights, float)
+        value = value + (actions ** 2) @ control_weights[:2]
+        ru = 2.0 * actions * control_weights[:2]
+        if self.forward_command:
+            value = value + control_weights[2] * actions[:, 0]
+            ru[:, 0] += control_weights[2]
+        return value, grad, ru
+
+
+def _ratio_gradient(num, num_d, den_sq_plus, den_d):
+    """(num / sqrt(q), d/d(px, py, yaw)) for q = den_sq_plus with dq = den_d (tuples of arrays)."""
+    root = np.sqrt(den_sq_plus)
+    ratio = num / root
+    return ratio, [nd / root - 0.5 * ratio * qd / den_sq_plus for nd, qd in zip(num_d, den_d)]
+
+
+def _weighted_state_features(features: "FeatureSet", weights: dict, states, times, task: Task,
+                             obstacles):
+    """sum_k w_k phi_k (T,) and its state gradient (T, 5), by hand (see FeatureSet._state_jets)."""
+    count = len(states)
+    px, py, yaw, v, w = (states[:, i] for i in range(5))
+    goal = np.asarray(task.goal, float)
+    gx, gy = goal[0] - px, goal[1] - py
+    ox, oy = obstacles[:, 0] - px, obstacles[:, 1] - py
+    goal_sq, obst_sq = gx * gx + gy * gy, ox * ox + oy * oy
+    cos_yaw, sin_yaw = np.cos(yaw), np.sin(yaw)
+    value = np.zeros(count)
+    grad = np.zeros((count, 5))          # columns px, py, yaw, v, w
+
+    def add(weight, phi, d_px, d_py, d_yaw=None, d_v=None, d_w=None):
+        nonlocal value
+        value = value + weight * phi
+        for column, part in enumerate((d_px, d_py, d_yaw, d_v, d_w)):
+            if part is not None:
+                grad[:, column] += weight * part
+
+    def gaussian(sq, x_part, y_part, width):
+        """exp(-sq / 2 width^2) and its (px, py) gradient, sq = x_part^2 + y_part^2 (parts = c - p)."""
+        g = np.exp(sq * (-0.5 / width ** 2))
+        return g, g * x_part / width ** 2, g * y_part / width ** 2
+
+    if features.goal_distance and weights["goal_distance"]:
+        root = np.sqrt(goal_sq + features.goal_softening ** 2)
+        add(weights["goal_distance"], root - features.goal_softening, -gx / root, -gy / root)
+    need_heading = weights["goal_heading"] or (features.goal_progress and weights[PROGRESS_FEATURE])
+    if need_heading:
+        heading, (h_px, h_py, h_yaw) = _ratio_gradient(
+            gx * cos_yaw + gy * sin_yaw, (-cos_yaw, -sin_yaw, -gx * sin_yaw + gy * cos_yaw),
+            goal_sq + features.heading_softening ** 2, (-2.0 * gx, -2.0 * gy, 0.0))
+        if weights["goal_heading"]:
+            add(weights["goal_heading"], heading, h_px, h_py, h_yaw)
+    if weights["obstacle_proximity"]:
+        add(weights["obstacle_proximity"], *gaussian(obst_sq, ox, oy, features.proximity_scale))
+    if weights["obstacle_ahead"]:
+        near, n_px, n_py = gaussian(obst_sq, ox, oy, features.ahead_scale)
+        between, (b_px, b_py) = _ratio_gradient(
+            gx * ox + gy * oy, (-ox - gx, -oy - gy), (goal_sq + 0.01) * (obst_sq + 0.01),
+            (-2.0 * gx * (obst_sq + 0.01) - 2.0 * ox * (goal_sq + 0.01),
+             -2.0 * gy * (obst_sq + 0.01) - 2.0 * oy * (goal_sq + 0.01)))
+        half = 0.5 * (between + 1.0)
+        add(weights["obstacle_ahead"], near * half, n_px * half + 0.5 * near * b_px,
+            n_py * half + 0.5 * near * b_py)
+    if features.obstacle_facing and weights[FACING_FEATURE]:
+        near, n_px, n_py = gaussian(obst_sq, ox, oy, features.ahead_scale)
+        facing, (f_px, f_py, f_yaw) = _ratio_gradient(
+            ox * cos_yaw + oy * sin_yaw, (-cos_yaw, -sin_yaw, -ox * sin_yaw + oy * cos_yaw),
+            obst_sq + features.heading_softening ** 2, (-2.0 * ox, -2.0 * oy, 0.0))
+        half = 0.5 * (facing + 1.0)
+        add(weights[FACING_FEATURE], near * half, n_px * half + 0.5 * near * f_px,
+            n_py * half + 0.5 * near * f_py, 0.5 * near * f_yaw)
+    if features.goal_slowing and weights[SLOWING_FEATURE]:
+        near, n_px, n_py = gaussian(goal_sq, gx, gy, features.goal_slow_scale)
+        add(weights[SLOWING_FEATURE], v * v * near, v * v * n_px, v * v * n_py, None, 2.0 * v * near)
+    if features.goal_progress and weights[PROGRESS_FEATURE]:
+        add(weights[PROGRESS_FEATURE], v * heading, v * h_px, v * h_py, v * h_yaw, heading)
+    for width in features.proximity_widths:
+        if weights[proximity_name(width)]:
+            add(weights[proximity_name(width)], *gaussian(obst_sq, ox, oy, width))
+    if features.predicted and weights[PREDICTED_FEATURE]:
+        tau = features.predicted
+        ahead = np.asarray(task.obstacle_position(times + tau), float).reshape(count, 2)
+        fx = ahead[:, 0] - px - tau * v * cos_yaw
+        fy = ahead[:, 1] - py - tau * v * sin_yaw
+        g = np.exp((fx * fx + fy * fy) * (-0.5 / features.proximity_scale ** 2))
+        scale = -g / features.proximity_scale ** 2     # d g = scale * (fx dfx + fy dfy)
+        add(weights[PREDICTED_FEATURE], g, -scale * fx, -scale * fy,
+            scale * tau * v * (fx * sin_yaw - fy * cos_yaw),
+            -scale * tau * (fx * cos_yaw + fy * sin_yaw))
+    if features.state_effort:
+        if weights["speed_squared"]:
+            add(weights["speed_squared"], v * v, None, None, None, 2.0 * v)
+        if weights["turn_squared"]:
+            add(weights["turn_squared"], w * w, None, None, None, None, 2.0 * w)
+    return value, grad

@@ -65,11 +65,19 @@ def fit_reward(demos: Sequence[Demonstration], kind: str = "linear", seed: int =
 # acceleration limit's curvature makes the exact H indefinite under a jittery stick); command noise
 # learned with the weights.
 PERSON_WINDOW, PERSON_STRIDE = 40, 20
+# Steps kept after a person demo first reaches the goal (sitting still there is part of it).
+PERSON_TRIM = 0
 # How the controller drives with a person reward: 20 steps of 0.4 s (8 s: far enough to see past
 # the obstacle - at 4 s stopping in front of it ranks above going round), no terminal weight (the
-# progress feature's sum is already the distance made good), detour seeds 0.8 m beside the obstacle
+# progress feature's sum is already the distance made good), detour seeds 0.8 m beside the obstacle,
+# one alternative seed per cycle (an even cycle time), discount 0.97 per step (without it, once the
+# goal is within the 8 s look-ahead the progress sum no longer grows with speed and the plan crawls
+# in, timing out slow styles; chosen on validation starts), and an arrival look-ahead of at least
+# 8 steps (min_horizon: the plan ends about when the robot would arrive at the reward's preferred
+# speed, as the learned windows do, so the last metres are not spread over 8 s; validation starts)
 # (RecedingHorizonController options).
-PERSON_CONTROLLER = {"horizon": 20, "plan_dt": 0.4, "terminal": 0.0, "detour": 0.8}
+PERSON_CONTROLLER = {"horizon": 20, "plan_dt": 0.4, "terminal": 0.0, "detour": 0.8,
+                     "spread_seeds": True, "discount": 0.97, "min_horizon": 8}
 # What reward_controller needs to drive a person reward (saved with it, `controller:` in the file):
 # PERSON_CONTROLLER plus the fixed collision barrier (m beyond touching; planner.CollisionBarrier).
 PERSON_DRIVING = dict(PERSON_CONTROLLER, collision_margin=0.1)
@@ -79,7 +87,7 @@ def fit_person_reward(demos: Sequence[Demonstration], seed: int = 0):
     """(reward, learner): linear CIOC over person_features() with PERSON_SIGNS and learned command
     noise, from demonstrations cut where they first reach the goal, in PERSON_WINDOW-step windows."""
     pieces = [piece for demo in demos
-              for piece in windows(trim_to_goal(demo, 0), PERSON_WINDOW, PERSON_STRIDE)]
+              for piece in windows(trim_to_goal(demo, PERSON_TRIM), PERSON_WINDOW, PERSON_STRIDE)]
     learner = LinearCIOC(person_features(), random_state=seed, signs=PERSON_SIGNS,
                          action_noise=PERSON_NOISE, second_order=False)
     with threadpool_limits(1):

@@ -84,13 +84,23 @@ class RewardControllerConfig(NodeConfig):
                                          "touching the obstacle to the learned reward; 0: none")
     detour: float = param(0.0, "> 0: also try plans passing this far (m) beside the obstacle's "
                                "centre (0: none; person rewards: 0.8)")
+    spread_seeds: bool = param(False, "try one alternative seed per cycle in turn instead of all "
+                                      "every 5th cycle (an even cycle time; person rewards: true)")
+    discount: float = param(1.0, "step t of a plan counts discount^t (< 1: the same reward sooner "
+                                 "is worth more; person rewards: 0.97)")
+    min_horizon: int = param(0, "> 0: plan only until about the arrival at the reward's preferred "
+                                "speed, at least this many steps and at most ~horizon (the plan "
+                                "ends near the goal instead of crawling into it); 0: always "
+                                "~horizon steps (person rewards: 8)")
     frame: str = param("odom", "frame of the published plan")
     enabled: bool = param(True, "drive from the start (service ~enable switches)")
     reward_settings: bool = param(True, "drive with the controller settings saved with the reward "
                                         "(learn_reward --kind person saves horizon, plan_dt, "
-                                        "terminal, detour, collision_margin) instead of these")
+                                        "terminal, detour, spread_seeds, discount, "
+                                        "min_horizon, collision_margin) instead of these")
 
-    SAVED_SETTINGS = ("horizon", "plan_dt", "terminal", "detour", "collision_margin")
+    SAVED_SETTINGS = ("horizon", "plan_dt", "terminal", "detour", "spread_seeds", "discount",
+                      "min_horizon", "collision_margin")
 
     def check(self) -> None:
         if not self.rate > 0:
@@ -99,6 +109,11 @@ class RewardControllerConfig(NodeConfig):
             raise ConfigError(f"~detour must be >= 0, got {self.detour!r}")
         if self.collision_margin < 0:
             raise ConfigError(f"~collision_margin must be >= 0, got {self.collision_margin!r}")
+        if not 0.0 < self.discount <= 1.0:
+            raise ConfigError(f"~discount must be in (0, 1], got {self.discount!r}")
+        if self.min_horizon != 0 and not 2 <= self.min_horizon <= self.horizon:
+            raise ConfigError(f"~min_horizon must be 0 or in [2, ~horizon={self.horizon}], "
+                              f"got {self.min_horizon!r}")
 
     def limits(self) -> UnicycleLimits:
         """The robot's limits (ModelError when one is not positive)."""
@@ -120,7 +135,9 @@ class RewardControllerConfig(NodeConfig):
     def controller_options(self) -> Dict[str, Any]:
         """Keyword arguments of planner.RecedingHorizonController."""
         return {"horizon": self.horizon, "plan_dt": self.plan_dt, "terminal": self.terminal,
-                "max_iter": self.max_iter, "detour": self.detour}
+                "max_iter": self.max_iter, "detour": self.detour,
+                "spread_seeds": self.spread_seeds, "discount": self.discount,
+                "min_horizon": self.min_horizon}
 
 
 @dataclass

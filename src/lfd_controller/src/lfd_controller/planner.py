@@ -4,6 +4,7 @@ controller that drives with a learned reward (no ROS).
 The trajectory reward R(U) = sum_t r(x_t, u_t, t) is maximised over the commands U with L-BFGS-B;
 its gradient comes from the adjoint pass (lambda_t = dR/dx_t, g_t = r_u + B_t^T lambda_t).
 """
+import math
 import time
 from typing import Optional, Sequence
 
@@ -12,31 +13,66 @@ from scipy.optimize import minimize
 
 from lfd_controller.errors import LfdError
 from lfd_controller.features import Task
+from robot_common.unicycle import Unicycle
 
 COMMAND_BOUND = 1.5   # commands are bounded to 1.5 x the limits (the smooth limit gives ~96% there)
+# Steps an arrival look-ahead (RecedingHorizonController min_horizon > 0) keeps beyond the arrival
+# at the preferred speed (the robot accelerates and turns before it cruises).
+ARRIVAL_MARGIN_STEPS = 2
+
+
+def preferred_speed(reward, v_max: float) -> float:
+    """The speed (m/s) at which a linear reward's per-step speed terms peak: the linear pull
+    (goal_progress, forward_command) over twice the squared-speed penalty (speed_squared,
+    speed_effort), w_lin / (2 |w_sq|) - the cruising speed of a person reward (the goal straight
+    ahead) - at most v_max; v_max when the reward has no positive pull or no negative penalty (no
+    speed of its own: the robot's limit). A wrapper with a `.reward` (CollisionBarrier) is looked
+    through; LfdError for a reward that is not linear."""
+    inner = getattr(reward, "reward", reward)
+    features, weights = getattr(inner, "features", None), getattr(inner, "weights", None)
+    if features is None or weights is None:
+        raise LfdError(f"a preferred speed needs a linear reward, got {type(inner).__name__}")
+    named = dict(zip(features.names, np.asarray(weights, float)))
+    linear = named.get("goal_progress", 0.0) + named.get("forward_command", 0.0)
+    squared = named.get("speed_squared", 0.0) + named.get("speed_effort", 0.0)
+    if not (linear > 0 and squared < 0):
+        return float(v_max)
+    return float(min(linear / (-2.0 * squared), v_max))
 
 
 def trajectory_reward(reward, model, task: Task, start, t0: float, actions, *, gradient: bool = True,
-                      terminal: float = 0.0):
+                      terminal: float = 0.0, discount: float = 1.0):
     """R(U) and dR/dU (T, 2) for commands `actions` (T, 2) from `start` at episode time t0.
 
     terminal > 0 counts the last step's reward 1 + terminal times (the reward of holding the final
-    state a while longer: a cost-to-go estimate for receding-horizon control)."""
+    state a while longer: a cost-to-go estimate for receding-horizon control); discount < 1
+    weighs step t's reward discount^t (the same reward sooner is worth more)."""
     actions = np.asarray(actions, dtype=float).reshape(-1, 2)
     count = len(actions)
-    states = model.rollout(start, actions)
     times = t0 + model.dt * np.arange(1, count + 1)
     if not gradient:
+        states = model.rollout(start, actions)
         values = reward.derivatives(states, actions, times, task, order=0).value
+        if discount != 1.0:
+            values = values * discount ** np.arange(count)
         return float(values.sum() + terminal * values[-1]), None
-    previous = np.vstack([start, states[:-1]])
-    _, a_mats, b_mats, _ = model.step_derivatives(previous, actions, second=False)
+    if type(model) is Unicycle:
+        states, partials = unicycle_rollout_partials(model, start, actions)
+    else:
+        states, partials = model.rollout(start, actions), None
     rd = reward.derivatives(states, actions, times, task, order=1)
     if terminal:
         scale = 1.0 + terminal
         rd.value[-1] *= scale
         rd.rx[-1] *= scale
         rd.ru[-1] *= scale
+    if discount != 1.0:
+        factor = discount ** np.arange(count)
+        rd.value, rd.rx, rd.ru = rd.value * factor, rd.rx * factor[:, None], rd.ru * factor[:, None]
+    if partials is not None:
+        return float(rd.value.sum()), unicycle_adjoint(model.dt, partials, rd.rx, rd.ru)
+    previous = np.vstack([start, states[:-1]])
+    _, a_mats, b_mats, _ = model.step_derivatives(previous, actions, second=False)
     lam = rd.rx[-1].copy()
     grad = np.empty_like(actions)
     for t in range(count - 1, -1, -1):
@@ -46,25 +82,94 @@ def trajectory_reward(reward, model, task: Task, start, t0: float, actions, *, g
     return float(rd.value.sum()), grad
 
 
+def unicycle_rollout_partials(model: Unicycle, start, actions):
+    """States x_1..x_T (T, 5) and, per step, the nonzero first derivatives of the unicycle step
+    (robot_common.unicycle): (cos yaw', sin yaw', v', dv'/dv, dv'/dv_cmd, dw'/dw, dw'/dw_cmd).
+    A scalar loop: for a planning horizon of tens of steps far cheaper than step_derivatives
+    (tested against it)."""
+    lim, dt = model.limits, model.dt
+    a_step, b_step = lim.a_max * dt, lim.alpha_max * dt
+    px, py, yaw, v, w = (float(value) for value in np.asarray(start, float))
+    states, partials = [], []
+    for v_cmd, w_cmd in np.asarray(actions, float).tolist():
+        v_sat, v_sat_d = _saturate_scalar(v_cmd, lim.v_max)
+        v_change, v_change_d = _saturate_scalar(v_sat - v, a_step)
+        w_sat, w_sat_d = _saturate_scalar(w_cmd, lim.w_max)
+        w_change, w_change_d = _saturate_scalar(w_sat - w, b_step)
+        v += v_change
+        w += w_change
+        yaw += dt * w
+        cos, sin = math.cos(yaw), math.sin(yaw)
+        px += dt * v * cos
+        py += dt * v * sin
+        states.append((px, py, yaw, v, w))
+        partials.append((cos, sin, v, 1.0 - v_change_d, v_change_d * v_sat_d, 1.0 - w_change_d,
+                         w_change_d * w_sat_d))
+    return np.array(states).reshape(-1, 5), partials
+
+
+def _saturate_scalar(z: float, limit: float):
+    """S(z) = z / (1 + (z/limit)^4)^(1/4) and S'(z) (robot_common.unicycle.saturate)."""
+    s = z / limit
+    base = 1.0 + s * s * s * s
+    root = math.sqrt(math.sqrt(base))
+    return z / root, 1.0 / (base * root)
+
+
+def unicycle_adjoint(dt: float, partials, rx, ru) -> np.ndarray:
+    """dR/dU (T, 2) by the adjoint pass over the unicycle's sparse step Jacobians: lambda_t =
+    r_x,t + A_{t+1}^T lambda_{t+1}, g_t = r_u,t + B_t^T lambda_t."""
+    count = len(partials)
+    grad = np.asarray(ru, float).tolist()
+    rx = np.asarray(rx, float).tolist()
+    lx = ly = lyaw = lv = lw = 0.0            # A_{t+1}^T lambda_{t+1} (0 after the last step)
+    for t in range(count - 1, -1, -1):
+        lx, ly, lyaw, lv, lw = (lx + rx[t][0], ly + rx[t][1], lyaw + rx[t][2], lv + rx[t][3],
+                                lw + rx[t][4])
+        cos, sin, v, v_v, v_cmd, w_w, w_cmd = partials[t]
+        # sensitivities to this step's new yaw, v, w through the position update
+        q_yaw = lyaw + dt * v * (ly * cos - lx * sin)
+        q_v = lv + dt * (lx * cos + ly * sin)
+        q_w = lw + dt * q_yaw
+        grad[t][0] += q_v * v_cmd
+        grad[t][1] += q_w * w_cmd
+        lyaw, lv, lw = q_yaw, q_v * v_v, q_w * w_w     # A_t^T lambda_t (px, py pass through)
+    return np.array(grad)
+
+
 def command_bounds(model, count: int):
     lim = model.limits
     return [(-COMMAND_BOUND * lim.v_max, COMMAND_BOUND * lim.v_max),
             (-COMMAND_BOUND * lim.w_max, COMMAND_BOUND * lim.w_max)] * count
 
 
+class _DeadlinePassed(Exception):
+    """Raised inside the objective to stop L-BFGS-B at optimise_commands' deadline."""
+
+
 def optimise_commands(reward, model, task: Task, start, t0: float, initial, *, max_iter: int = 200,
-                      terminal: float = 0.0):
-    """Locally optimal commands from `initial` (T, 2); returns (commands, R)."""
+                      terminal: float = 0.0, discount: float = 1.0, deadline: Optional[float] = None):
+    """Locally optimal commands from `initial` (T, 2); returns (commands, R). deadline: a
+    time.perf_counter() time after which no further evaluation starts (the best commands
+    evaluated so far are returned; the initial guess is always evaluated)."""
     initial = np.asarray(initial, dtype=float)
     shape = initial.shape
+    best = [None, -np.inf]
 
     def negative(flat):
+        if deadline is not None and best[0] is not None and time.perf_counter() > deadline:
+            raise _DeadlinePassed
         value, grad = trajectory_reward(reward, model, task, start, t0, flat.reshape(shape),
-                                        terminal=terminal)
+                                        terminal=terminal, discount=discount)
+        if value > best[1]:
+            best[0], best[1] = flat.copy(), value
         return -value, -grad.reshape(-1)
-    res = minimize(negative, initial.reshape(-1), jac=True, method="L-BFGS-B",
-                   bounds=command_bounds(model, shape[0]),
-                   options={"maxiter": max_iter, "gtol": 1e-7, "ftol": 1e-12})
+    try:
+        res = minimize(negative, initial.reshape(-1), jac=True, method="L-BFGS-B",
+                       bounds=command_bounds(model, shape[0]),
+                       options={"maxiter": max_iter, "gtol": 1e-7, "ftol": 1e-12})
+    except _DeadlinePassed:
+        return best[0].reshape(shape), float(best[1])
     return res.x.reshape(shape), -float(res.fun)
 
 
@@ -171,16 +276,28 @@ class RecedingHorizonController:
         seed_iter: iterations for each alternative seed (0 = no seeds after the first plan), tried
         every `seed_every` calls (turning seeds find ways around an obstacle that the warm start,
         a local optimum, misses); budget: seconds one call may take (None: no limit) - the
-        seeds are skipped once the warm start has used half of it, and calls that still exceed
-        it are counted in `overruns_` (cycle_times_ keeps every call's duration);
+        iterations stop at 0.9 of it (keeping the best iterate), the seeds are skipped once half
+        of it is used, and calls that still exceed it are counted in `overruns_`
+        (cycle_times_ keeps every call's duration; the first call of an episode, which plans
+        from every seed, is not cut);
         detour: > 0 adds two detour_seeds (pure pursuit past the obstacle this far from its
-        centre on either side) to the seeds (0: none).
+        centre on either side) to the seeds (0: none); spread_seeds: try one alternative seed per
+        call, in turn, instead of all of them every seed_every calls (the same search spread
+        evenly: no slow calls). Seeds are only built when they are tried; the budget stops
+        trying them once half of it is used; discount < 1: step t's reward counts discount^t
+        (trajectory_reward); min_horizon > 0: an arrival look-ahead - each call plans
+        ceil(goal distance / (preferred_speed(reward, v_max) x step)) + ARRIVAL_MARGIN_STEPS steps,
+        clipped to [min_horizon, horizon], so the plan ends about when the robot would arrive
+        (with the goal well inside a fixed look-ahead, speed costs spread the last metres over it:
+        a crawl; the learned windows end at arrival); 0: always `horizon` steps. `steps_` is the
+        last call's count.
     """
 
     def __init__(self, reward, model, *, horizon: int = 20, plan_dt: Optional[float] = 0.2,
                  terminal: float = 10.0, max_iter: int = 15, seed_iter: int = 6, seed_every: int = 5,
                  seed_turns: Sequence[float] = (0.0, 1.2, -1.2), budget: Optional[float] = None,
-                 detour: float = 0.0):
+                 detour: float = 0.0, spread_seeds: bool = False, discount: float = 1.0,
+                 min_horizon: int = 0):
         if horizon < 2:
             raise LfdError(f"the planning horizon must be at least 2 steps, got {horizon}")
         if plan_dt is not None and not plan_dt > 0:
@@ -194,6 +311,15 @@ class RecedingHorizonController:
             raise LfdError(f"the cycle budget must be positive seconds, got {budget!r}")
         self.budget = budget
         self.detour = float(detour)
+        self.spread_seeds = bool(spread_seeds)
+        if not 0.0 < discount <= 1.0:
+            raise LfdError(f"the discount must be in (0, 1], got {discount!r}")
+        self.discount = float(discount)
+        self.min_horizon = int(min_horizon)
+        if self.min_horizon != 0 and not 2 <= self.min_horizon <= self.horizon:
+            raise LfdError(f"min_horizon must be 0 (fixed horizon) or in [2, horizon={self.horizon}], "
+                           f"got {min_horizon!r}")
+        self.speed = preferred_speed(reward, self.model.limits.v_max) if self.min_horizon else None
         self.reset()
 
     def reset(self) -> None:
@@ -201,37 +327,67 @@ class RecedingHorizonController:
         self._plan_time: Optional[float] = None
         self.cycle_times_: list = []
         self.overruns_ = 0
+        self.steps_ = self.horizon
+
+    def planning_steps(self, state, task: Task) -> int:
+        """Steps planned from `state`: `horizon`, or with min_horizon > 0 the arrival look-ahead."""
+        if not self.min_horizon:
+            return self.horizon
+        distance = float(np.hypot(*(np.asarray(task.goal, float) - np.asarray(state, float)[:2])))
+        arrival = math.ceil(distance / (self.speed * self.model.dt)) + ARRIVAL_MARGIN_STEPS
+        return int(min(max(arrival, self.min_horizon), self.horizon))
 
     def _warm_start(self, t: float) -> Optional[np.ndarray]:
         if self.plan_ is None or self._plan_time is None:
             return None
+        steps = self.steps_
+        plan = self.plan_[:steps]        # cut or held at its last command to the new length
+        if len(plan) < steps:
+            plan = np.vstack([plan, np.repeat(plan[-1:], steps - len(plan), axis=0)])
         shift = (t - self._plan_time) / self.model.dt
-        if shift < 0 or shift >= self.horizon - 1:
+        if shift < 0 or shift >= steps - 1:
             return None
-        steps = np.arange(self.horizon) + shift
-        return np.column_stack([np.interp(steps, np.arange(self.horizon), self.plan_[:, i]) for i in (0, 1)])
+        at = np.arange(steps) + shift
+        return np.column_stack([np.interp(at, np.arange(steps), plan[:, i]) for i in (0, 1)])
+
+    def _seeds(self, state, t: float, task: Task, which: Optional[int]) -> list:
+        """The alternative initial guesses (all of them, or only the one numbered `which`)."""
+        count = len(self.seed_turns) + (2 if self.detour > 0 else 0)
+        chosen = range(count) if which is None else [which % count]
+        seeds = []
+        for k in chosen:
+            if k < len(self.seed_turns):
+                seeds += seed_commands(self.model, self.steps_, (self.seed_turns[k],))
+            else:
+                side = k - len(self.seed_turns)
+                seeds.append(detour_seeds(self.model, self.steps_, state, t, task, self.detour)[side])
+        return seeds
 
     def act(self, state, t: float, task: Task) -> np.ndarray:
         """The command to apply now at state (5,) and episode time t."""
         started = time.perf_counter()
+        self.steps_ = self.planning_steps(state, task)
         warm = self._warm_start(t)
-        seeds = seed_commands(self.model, self.horizon, self.seed_turns)
-        if self.detour > 0:
-            seeds += detour_seeds(self.model, self.horizon, state, t, task, self.detour)
         candidates = []
+        deadline = None if self.budget is None else started + 0.9 * self.budget
         if warm is not None:
             candidates.append(optimise_commands(self.reward, self.model, task, state, t, warm,
-                                                max_iter=self.max_iter, terminal=self.terminal))
-            seeds_iter = self.seed_iter if len(self.cycle_times_) % self.seed_every == 0 else 0
-        else:
-            seeds_iter = self.max_iter
-        if self.budget is not None and warm is not None and \
-                time.perf_counter() - started > 0.5 * self.budget:
-            seeds_iter = 0
+                                                max_iter=self.max_iter, terminal=self.terminal,
+                                                discount=self.discount, deadline=deadline))
+            calls = len(self.cycle_times_)
+            if self.spread_seeds:       # one alternative seed per call, in turn: an even cycle
+                seeds_iter, which = self.seed_iter, calls
+            else:                       # all of them every seed_every calls
+                seeds_iter, which = (self.seed_iter if calls % self.seed_every == 0 else 0), None
+        else:       # the first plan: every seed, not cut by the budget
+            seeds_iter, which, deadline = self.max_iter, None, None
         if seeds_iter > 0:
-            for seed in seeds:
+            for seed in self._seeds(state, t, task, which):
+                if deadline is not None and time.perf_counter() - started > 0.5 * self.budget:
+                    break
                 candidates.append(optimise_commands(self.reward, self.model, task, state, t, seed,
-                                                    max_iter=seeds_iter, terminal=self.terminal))
+                                                    max_iter=seeds_iter, terminal=self.terminal,
+                                                    discount=self.discount, deadline=deadline))
         plan, _ = max(candidates, key=lambda item: item[1])
         self.plan_, self._plan_time = plan, t
         elapsed = time.perf_counter() - started

@@ -63,6 +63,9 @@ class LinearReward:
         return self.weights[len(self.features.state_names):]
 
     def derivatives(self, states, actions, times, task: Task, *, order: int = 2) -> RewardDerivatives:
+        if order < 2:       # planning: the hand-written first-order path (no jets)
+            return RewardDerivatives(*self.features.weighted_first_order(
+                states, actions, times, task, self.state_weights, self.control_weights))
         fv = self.features.evaluate(states, actions, times, task, order=order)
         r_phi = np.broadcast_to(self.state_weights, fv.state.shape)
         return compose(fv, r_phi, None, fv.state @ self.state_weights, self.control_weights, order)

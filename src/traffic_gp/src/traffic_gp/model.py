@@ -21,6 +21,14 @@ rate leaks through a wall into the room behind it; "geodesic" puts it on a
 when `fit` is given the cells, xy otherwise. With geodesic inputs, parts of the free space
 that no training row's place connects to (walled off from everything watched) are predicted
 empty (`posterior.UNREACHABLE_DENSITY`).
+Offset (`profile`): "none" (the default) has a constant mean; "daily", "daytype" or "weekly"
+adds a per-place profile of the log rate (`rate_profile.RateProfile`: each place's own counts /
+exposure per time bin, `profile_bin_minutes` wide, shrunk toward place rate x bin shape with
+`profile_prior_exposure` of pseudo-exposure) to the latent, so the GP models the multiplicative
+residual. `fit` builds it from the rows it trains on (not the held-out ones), `partial_fit` adds
+the new rows to it, `save` keeps it. Where each place is watched often (fixed sensors, cells a
+robot passes every day) the profile gives every place its own shape of the day at once, which
+one smooth kernel over places far apart learns slowly.
 `partial_fit` continues from the current state (warm start) with the new rows added to the data
 (all rows, no hold-out, no early stopping). TensorFlow is imported on first use (by `gp_parts`).
 
@@ -40,15 +48,18 @@ from robot_common.cells import HOURS_PER_WEEK, CellGrid
 from traffic_gp.errors import ConfigError, ModelFormatError, NotFittedError
 from traffic_gp.geodesic import DEFAULT_DIMS, GeodesicEmbedding
 from traffic_gp.observations import Observations
-from traffic_gp.persistence import read_parameters, read_spatial, write_model_file
+from traffic_gp.persistence import read_parameters, read_profile, read_spatial, write_model_file
 from traffic_gp.posterior import LatentPredictions
+from traffic_gp.rate_profile import KINDS as PROFILE_KINDS
+from traffic_gp.rate_profile import RateProfile
 
 log = logging.getLogger(__name__)
 
 PARAMS = ("n_inducing", "spatial_lengthscale", "hourly", "weekly", "batch_size", "n_steps",
           "online_steps", "learning_rate", "natgrad_gamma", "train_inducing", "max_rows",
           "time_bin_minutes", "random_state", "likelihood", "validation_fraction", "eval_every",
-          "patience", "spatial_inputs", "geodesic_dims")
+          "patience", "spatial_inputs", "geodesic_dims", "profile", "profile_bin_minutes",
+          "profile_prior_exposure")
 SPATIAL_INPUTS = ("auto", "xy", "geodesic")
 WARMUP_STEPS = 100
 ADAM_WARMUP_STEPS = 50      # a new optimiser's (after fit or load) step size ramps up over these
@@ -79,6 +90,9 @@ class TrafficGP(LatentPredictions):
         patience: evaluations without a better validation loss before `fit` stops.
         spatial_inputs: "auto", "xy" or "geodesic" (see the module docstring).
         geodesic_dims: coordinates of the geodesic embedding.
+        profile: "none", or the per-place offset's bins: "daily", "daytype" or "weekly".
+        profile_bin_minutes: width of the offset's time bins.
+        profile_prior_exposure: pseudo-exposure shrinking a sparse bin toward its prior.
         progress: show a tqdm bar while training.
     """
 
@@ -90,7 +104,8 @@ class TrafficGP(LatentPredictions):
                  random_state: Optional[int] = 0, likelihood: str = "negbin",
                  validation_fraction: float = 0.1, eval_every: int = 50, patience: int = 6,
                  spatial_inputs: str = "auto", geodesic_dims: int = DEFAULT_DIMS,
-                 progress: bool = False):
+                 profile: str = "none", profile_bin_minutes: float = 60.0,
+                 profile_prior_exposure: float = 1.0, progress: bool = False):
         self.n_inducing, self.spatial_lengthscale = n_inducing, spatial_lengthscale
         self.hourly, self.weekly = hourly, weekly
         self.batch_size, self.n_steps, self.online_steps = batch_size, n_steps, online_steps
@@ -100,6 +115,8 @@ class TrafficGP(LatentPredictions):
         self.likelihood, self.validation_fraction = likelihood, validation_fraction
         self.eval_every, self.patience = eval_every, patience
         self.spatial_inputs, self.geodesic_dims = spatial_inputs, geodesic_dims
+        self.profile, self.profile_bin_minutes = profile, profile_bin_minutes
+        self.profile_prior_exposure = profile_prior_exposure
         self.progress = progress
 
     def get_params(self) -> dict:
@@ -122,7 +139,11 @@ class TrafficGP(LatentPredictions):
                   "validation_fraction": 0 <= self.validation_fraction < 1,
                   "eval_every": self.eval_every >= 1, "patience": self.patience >= 1,
                   "spatial_inputs": self.spatial_inputs in SPATIAL_INPUTS,
-                  "geodesic_dims": self.geodesic_dims >= 1}
+                  "geodesic_dims": self.geodesic_dims >= 1,
+                  "profile": self.profile in ("none",) + PROFILE_KINDS,
+                  "profile_bin_minutes": self.profile_bin_minutes > 0
+                  and 1440 % self.profile_bin_minutes == 0,
+                  "profile_prior_exposure": self.profile_prior_exposure > 0}
         bad = [f"{name}={getattr(self, name)!r}" for name, ok in checks.items() if not ok]
         if bad:
             raise ConfigError(f"bad TrafficGP parameters: {', '.join(bad)}")
@@ -152,8 +173,14 @@ class TrafficGP(LatentPredictions):
         self._validation_rows = np.sort(order[:min(n_val, EVAL_ROWS)])
         self._train_rows = np.sort(order[n_val:])
         fit_part = obs.subset(self._train_rows)
+        self.profile_ = None
+        if self.profile != "none":
+            self.profile_ = RateProfile(self.profile, self.profile_bin_minutes,
+                                        self.profile_prior_exposure)
+            self.profile_.update(fit_part.x, fit_part.y, fit_part.t, fit_part.exposure,
+                                 fit_part.count)
         inputs = self._obs_inputs(fit_part)
-        rate = max(fit_part.count.sum(), 0.5) / fit_part.exposure.sum()
+        rate = max(fit_part.count.sum(), 0.5) / self._targets(fit_part)[:, 1].sum()
         self.model_ = gp_parts.build_model(
             self._initial_inducing(inputs), spatial_lengthscale=self.spatial_lengthscale,
             hourly=self.hourly, weekly=self.weekly, log_mean=float(np.log(rate)),
@@ -175,6 +202,8 @@ class TrafficGP(LatentPredictions):
         if len(obs):
             if self.embedding_ is not None:
                 self.embedding_.mark_observed(obs.x, obs.y)
+            if self.profile_ is not None:
+                self.profile_.update(obs.x, obs.y, obs.t, obs.exposure, obs.count)
             data = Observations.concat([self.data_, obs])
             if len(data) > self.max_rows:
                 data = data.compress(self.time_bin_minutes / 60.0, self.period)
@@ -184,6 +213,14 @@ class TrafficGP(LatentPredictions):
 
     def _obs_inputs(self, obs: Observations) -> np.ndarray:
         return self.model_inputs(obs.x, obs.y, obs.t)
+
+    def _targets(self, obs: Observations) -> np.ndarray:
+        """[count, exposure] columns of the likelihood; with a profile, the exposure times the
+        profile's rate (the offset of the log rate: the GP sees the residual)."""
+        exposure = obs.exposure
+        if self.profile_ is not None:
+            exposure = exposure * np.exp(self.profile_.log_rate(obs.x, obs.y, obs.t))
+        return np.column_stack([obs.count, exposure])
 
     def _initial_inducing(self, inputs: np.ndarray) -> np.ndarray:
         unique = np.unique(inputs, axis=0)
@@ -201,13 +238,13 @@ class TrafficGP(LatentPredictions):
         rows = getattr(self, "_train_rows", None)
         data = self.data_ if rows is None else self.data_.subset(rows)
         inputs = self._obs_inputs(data)
-        targets = np.column_stack([data.count, data.exposure])
+        targets = self._targets(data)
         eval_rows = np.random.default_rng(self.random_state).permutation(len(data))[:EVAL_ROWS]
         eval_inputs, eval_targets = inputs[eval_rows], targets[eval_rows]
         if early_stopping:
             held_out = self.data_.subset(self._validation_rows)
             val_inputs = self._obs_inputs(held_out)
-            val_targets = np.column_stack([held_out.count, held_out.exposure])
+            val_targets = self._targets(held_out)
         size = min(self.batch_size, len(data))
         steps = range(n_steps)
         if self.progress and n_steps:
@@ -303,8 +340,9 @@ class TrafficGP(LatentPredictions):
                   "best_step": getattr(self, "best_step_", None),
                   "libraries": gp_parts.library_versions(), "meta": meta or {}}
         spatial = None if self.embedding_ is None else self.embedding_.to_arrays()
+        profile = None if self.profile_ is None else self.profile_.to_arrays()
         return write_model_file(path, header, gp_parts.parameter_values(self.model_),
-                                self.data_ if include_data else None, spatial)
+                                self.data_ if include_data else None, spatial, profile)
 
     @classmethod
     def load(cls, path) -> "TrafficGP":
@@ -317,6 +355,10 @@ class TrafficGP(LatentPredictions):
         except (TypeError, KeyError) as err:
             raise ModelFormatError(f"{path}: the saved model lacks {err}") from err
         estimator.embedding_ = GeodesicEmbedding.from_arrays(read_spatial(path))
+        estimator.profile_ = RateProfile.from_arrays(read_profile(path))
+        if (estimator.profile_ is None) != (estimator.profile == "none"):
+            raise ModelFormatError(f"{path}: profile={estimator.profile!r} but the file "
+                                   f"{'lacks' if estimator.profile_ is None else 'holds'} one")
         estimator._restore(header, values, inducing, data)
         return estimator
 

@@ -4,7 +4,8 @@ A file holds a JSON header (`format`, `format_version`, then whatever the estima
 parameters, training statistics, library versions, caller metadata such as the map it was
 trained on), a set of named arrays (the GP parameters in unconstrained form, so that a loaded
 model predicts bit for bit what the saved one did), the arrays of the spatial inputs when the
-model has map-aware ones (`geodesic.GeodesicEmbedding.to_arrays`) and, optionally, the training
+model has map-aware ones (`geodesic.GeodesicEmbedding.to_arrays`), the arrays of its rate profile
+(the GP's per-place offset, `rate_profile.RateProfile.to_arrays`) if it has one and, optionally, the training
 rows (so `partial_fit` can continue after loading). This module knows the layout, not the estimators:
 `TrafficGP.save` / `TrafficGP.load` and `PosteriorSnapshot.load` decide what goes in and what
 comes out. Files are written to a temporary name and renamed: a crash never leaves half a model
@@ -22,26 +23,30 @@ from traffic_gp.errors import ModelFormatError
 from traffic_gp.observations import FIELDS, Observations
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "PARAM_PREFIX", "DATA_PREFIX", "SPATIAL_PREFIX",
-           "write_model_file", "read_header", "read_parameters", "read_spatial"]
+           "PROFILE_PREFIX", "write_model_file", "read_header", "read_parameters", "read_spatial",
+           "read_profile"]
 
 FORMAT = "traffic_gp.TrafficGP"
 FORMAT_VERSION = 1
 PARAM_PREFIX = "param:"
 DATA_PREFIX = "data:"
 SPATIAL_PREFIX = "spatial:"
+PROFILE_PREFIX = "profile:"
 
 
 def write_model_file(path, header: dict, parameters: Dict[str, np.ndarray],
                      data: Optional[Observations] = None,
-                     spatial: Optional[Dict[str, np.ndarray]] = None) -> Path:
+                     spatial: Optional[Dict[str, np.ndarray]] = None,
+                     profile: Optional[Dict[str, np.ndarray]] = None) -> Path:
     """Write `header` (JSON-able; `format`, `format_version` and `saved_at` are added), the named
-    parameter arrays, the spatial-input arrays (if any) and optionally the training rows to
-    `path` (.npz); returns the path."""
+    parameter arrays, the spatial-input and rate-profile arrays (if any) and optionally the
+    training rows to `path` (.npz); returns the path."""
     path = Path(path)
     header = {"format": FORMAT, "format_version": FORMAT_VERSION, **header}
     header.update(format=FORMAT, format_version=FORMAT_VERSION, saved_at=time.time())
     arrays = {PARAM_PREFIX + key: value for key, value in parameters.items()}
     arrays.update({SPATIAL_PREFIX + key: value for key, value in (spatial or {}).items()})
+    arrays.update({PROFILE_PREFIX + key: value for key, value in (profile or {}).items()})
     if data is not None:
         arrays.update({DATA_PREFIX + name: getattr(data, name) for name in FIELDS})
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -77,6 +82,14 @@ def read_spatial(path) -> Dict[str, np.ndarray]:
         _header(archive, path)
         return {key[len(SPATIAL_PREFIX):]: archive[key] for key in archive.files
                 if key.startswith(SPATIAL_PREFIX)}
+
+
+def read_profile(path) -> Dict[str, np.ndarray]:
+    """The rate-profile arrays of a saved model by name (empty: the model has no offset)."""
+    with _open(path) as archive:
+        _header(archive, path)
+        return {key[len(PROFILE_PREFIX):]: archive[key] for key in archive.files
+                if key.startswith(PROFILE_PREFIX)}
 
 
 def _open(path):

@@ -8,7 +8,9 @@ predicts the latent log density as the whitened SVGP's `predict_f` does; a negat
 model's dispersion (`.likelihood.dispersion`, softplus) comes along, so count intervals and
 log-likelihoods are those of the saved likelihood. A model with map-aware spatial inputs keeps
 its `geodesic.GeodesicEmbedding` in the file (`persistence.read_spatial`): the snapshot maps
-places to the same inputs. `LatentPredictions` holds the predictions both `TrafficGP` and the
+places to the same inputs; a model with a rate profile (`rate_profile.RateProfile`, the per-place
+offset of the log rate) keeps it in the file too (`persistence.read_profile`) and the snapshot
+adds it as the model does. `LatentPredictions` holds the predictions both `TrafficGP` and the
 snapshot derive from the latent Gaussian.
 """
 import re
@@ -20,7 +22,8 @@ import traffic_gp.predictive as predictive
 from robot_common.cells import HOURS_PER_WEEK
 from traffic_gp.errors import ConfigError, ModelFormatError, NotFittedError
 from traffic_gp.geodesic import GeodesicEmbedding
-from traffic_gp.persistence import read_parameters, read_spatial
+from traffic_gp.persistence import read_parameters, read_profile, read_spatial
+from traffic_gp.rate_profile import RateProfile
 
 JITTER = 1e-6          # GPflow's default jitter on K(Z, Z)
 UNREACHABLE_DENSITY = 1e-6   # people per m^2 where no watched place connects (geodesic inputs)
@@ -30,12 +33,14 @@ CHUNK = 20000          # prediction rows per block (memory stays small)
 class LatentPredictions:
     """Predictions from the Gaussian over the log density f(x, y, t); subclasses provide
     `_latent(inputs, full_cov)`, `_fitted()`, `period`, `random_state`, `dispersion_`
-    (None for Poisson counts, r of the negative binomial otherwise) and `embedding_` (None:
+    (None for Poisson counts, r of the negative binomial otherwise), `embedding_` (None:
     the kernel works on x, y; else the `GeodesicEmbedding` giving the spatial inputs; places
     it finds unreachable from every watched place get the log of UNREACHABLE_DENSITY, with no
-    uncertainty: nobody can walk there)."""
+    uncertainty: nobody can walk there) and `profile_` (None, or the `RateProfile` whose log
+    rate is added to the GP's latent mean: the GP then models the residual)."""
 
     embedding_: Optional[GeodesicEmbedding] = None
+    profile_: Optional[RateProfile] = None
 
     def model_inputs(self, x, y, t) -> np.ndarray:
         """The GP's input rows for places (x, y) and times t: the spatial columns (x, y, or the
@@ -57,9 +62,11 @@ class LatentPredictions:
     def _latent_at(self, x, y, t, full_cov: bool = False):
         """`_latent` at places and times, with the unreachable places set (see the class)."""
         mean, cov = self._latent(self._inputs(x, y, t), full_cov=full_cov)
+        x, y, t = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (x, y, t)))
+        if self.profile_ is not None:
+            mean = mean + self.profile_.log_rate(x, y, t)
         if self.embedding_ is None:
             return mean, cov
-        x, y, _ = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (x, y, t)))
         away = self.embedding_.unreachable(x, y)
         if away.any():
             mean, cov = mean.copy(), cov.copy()
@@ -145,9 +152,11 @@ class PosteriorSnapshot(LatentPredictions):
     """
 
     def __init__(self, header: dict, values: Dict[str, np.ndarray], path: str = "",
-                 spatial: Optional[Dict[str, np.ndarray]] = None):
+                 spatial: Optional[Dict[str, np.ndarray]] = None,
+                 profile: Optional[Dict[str, np.ndarray]] = None):
         params = header["params"]
         self.embedding_ = GeodesicEmbedding.from_arrays(spatial)
+        self.profile_ = RateProfile.from_arrays(profile or {})
         self.path, self.header = path, header
         self.weekly = bool(params.get("weekly", False))
         self.random_state = params.get("random_state", 0)
@@ -178,7 +187,7 @@ class PosteriorSnapshot(LatentPredictions):
     def load(cls, path) -> "PosteriorSnapshot":
         """The posterior of a model file written by `TrafficGP.save` (no TensorFlow)."""
         header, values, _ = read_parameters(path)
-        return cls(header, values, str(path), read_spatial(path))
+        return cls(header, values, str(path), read_spatial(path), read_profile(path))
 
     @property
     def period(self) -> float:

@@ -1,0 +1,198 @@
+"""The planner's fast paths against their slow references: the hand-written first-order features
+against the jets, the unicycle adjoint against step_derivatives and finite differences; plus the
+discount, the deadline, the spread seeds and the arrival look-ahead of the receding-horizon
+controller."""
+import time
+
+import numpy as np
+import pytest
+
+from lfd_controller.errors import LfdError
+from lfd_controller.features import FeatureSet, Task
+from lfd_controller.learning import load_reward, person_features, save_reward
+from lfd_controller.planner import (
+    CollisionBarrier,
+    RecedingHorizonController,
+    optimise_commands,
+    preferred_speed,
+    trajectory_reward,
+)
+from lfd_controller.rewards import LinearReward, compose
+from robot_common.unicycle import Unicycle
+from robot_sim.scenarios import load_scenario
+
+ALL_FEATURES = dict(forward_command=True, obstacle_facing=True, goal_slowing=True, goal_progress=True,
+                    proximity_widths=(0.5, 0.8), predicted=1.0, state_effort=True)
+
+
+class ReferenceUnicycle(Unicycle):
+    """The same robot; not exactly Unicycle, so trajectory_reward takes its generic path
+    (rollout + step_derivatives + dense adjoint)."""
+
+
+def random_trajectory(rng, count):
+    states = np.column_stack([rng.uniform(-3, 1, count), rng.uniform(-2, 2, count),
+                              rng.uniform(-3, 3, count), rng.uniform(-0.6, 0.6, count),
+                              rng.uniform(-2, 2, count)])
+    return states, rng.normal(size=(count, 2)), rng.uniform(0.0, 20.0, count)
+
+
+@pytest.mark.parametrize("options", [{}, ALL_FEATURES, dict(goal_distance=False, goal_progress=True,
+                                                                predicted=0.7, state_effort=True)])
+@pytest.mark.parametrize("name", ["static_obstacle", "moving_obstacle", "oscillating_obstacle"])
+def test_hand_written_first_order_features_match_the_jets(options, name):
+    rng = np.random.default_rng(3)
+    features = FeatureSet(**options)
+    task = Task.from_scenario(load_scenario(name))
+    states, actions, times = random_trajectory(rng, 25)
+    weights = rng.normal(size=len(features.names))
+    weights[1] = 0.0                                   # a zero weight is skipped, not mis-summed
+    count = len(features.state_names)
+    fv = features.evaluate(states, actions, times, task, order=1)
+    reference = compose(fv, np.broadcast_to(weights[:count], fv.state.shape), None,
+                        fv.state @ weights[:count], weights[count:], 1)
+    value, rx, ru = features.weighted_first_order(states, actions, times, task, weights[:count],
+                                                  weights[count:])
+    np.testing.assert_allclose(value, reference.value, atol=1e-12)
+    np.testing.assert_allclose(rx, reference.rx, atol=1e-12)
+    np.testing.assert_allclose(ru, reference.ru, atol=1e-12)
+
+
+def person_like_reward(rng):
+    features = person_features()
+    weights = -np.abs(rng.normal(size=len(features.names))) * 10.0
+    weights[list(features.names).index("goal_progress")] = 80.0
+    return LinearReward(weights, features)
+
+
+@pytest.mark.parametrize("plan_dt", [0.1, 0.4])
+def test_the_unicycle_adjoint_matches_the_generic_path_and_finite_differences(plan_dt):
+    rng = np.random.default_rng(7)
+    scenario = load_scenario("moving_obstacle")
+    task = Task.from_scenario(scenario)
+    reward = CollisionBarrier(person_like_reward(rng), scenario.clearance)
+    start = np.array([-1.8, -0.9, 0.3, 0.2, 0.4])
+    actions = rng.normal(size=(12, 2)) * [0.5, 2.0]
+    for terminal, discount in ((0.0, 1.0), (3.0, 0.9)):
+        fast = trajectory_reward(reward, Unicycle(plan_dt), task, start, 1.5, actions,
+                                 terminal=terminal, discount=discount)
+        slow = trajectory_reward(reward, ReferenceUnicycle(plan_dt), task, start, 1.5, actions,
+                                 terminal=terminal, discount=discount)
+        assert fast[0] == pytest.approx(slow[0], abs=1e-10)
+        np.testing.assert_allclose(fast[1], slow[1], atol=1e-9)
+        step, numeric = 1e-6, np.zeros_like(actions)
+        for index in np.ndindex(actions.shape):
+            up, down = actions.copy(), actions.copy()
+            up[index] += step
+            down[index] -= step
+            numeric[index] = (trajectory_reward(reward, Unicycle(plan_dt), task, start, 1.5, up,
+                                                gradient=False, terminal=terminal, discount=discount)[0]
+                              - trajectory_reward(reward, Unicycle(plan_dt), task, start, 1.5, down,
+                                                  gradient=False, terminal=terminal,
+                                                  discount=discount)[0]) / (2 * step)
+        np.testing.assert_allclose(fast[1], numeric, rtol=1e-5, atol=1e-4)
+
+
+def test_the_discount_weighs_step_t_by_discount_to_the_t():
+    rng = np.random.default_rng(11)
+    scenario = load_scenario("static_obstacle")
+    task, model = Task.from_scenario(scenario), Unicycle(0.4)
+    reward = person_like_reward(rng)
+    start, actions = np.array([-2.5, 0.3, 0.0, 0.0, 0.0]), np.tile([0.4, 0.1], (6, 1))
+    states = model.rollout(start, actions)
+    per_step = reward.derivatives(states, actions, 0.4 * np.arange(1, 7), task, order=0).value
+    expected = sum(per_step[t] * 0.5 ** t for t in range(6))
+    value, _ = trajectory_reward(reward, model, task, start, 0.0, actions, discount=0.5)
+    assert value == pytest.approx(expected, rel=1e-12)
+
+
+def test_a_passed_deadline_returns_the_initial_guess_and_no_deadline_improves_it():
+    rng = np.random.default_rng(5)
+    scenario = load_scenario("static_obstacle")
+    task, model = Task.from_scenario(scenario), Unicycle(0.4)
+    reward = person_like_reward(rng)
+    start, initial = np.array([-2.5, 0.3, 0.0, 0.0, 0.0]), np.tile([0.2, 0.0], (20, 1))
+    initial_value = trajectory_reward(reward, model, task, start, 0.0, initial, gradient=False)[0]
+    plan, value = optimise_commands(reward, model, task, start, 0.0, initial, max_iter=15,
+                                    deadline=time.perf_counter() - 1.0)
+    np.testing.assert_array_equal(plan, initial)
+    assert value == pytest.approx(initial_value)
+    _, optimised = optimise_commands(reward, model, task, start, 0.0, initial, max_iter=15)
+    assert optimised > initial_value + 1.0
+
+
+def test_spread_seeds_try_one_alternative_per_call_in_turn():
+    scenario = load_scenario("static_obstacle")
+    task = Task.from_scenario(scenario)
+    reward = person_like_reward(np.random.default_rng(2))
+    controller = RecedingHorizonController(reward, scenario.model(), horizon=8, plan_dt=0.4,
+                                           detour=0.8, spread_seeds=True)
+    state = np.array([-2.5, 0.1, 0.0, 0.0, 0.0])
+    every = controller._seeds(state, 0.0, task, None)
+    assert len(every) == 5                              # three turning seeds + two detours
+    for k in range(7):
+        (one,) = controller._seeds(state, 0.0, task, k)
+        np.testing.assert_array_equal(one, every[k % 5])
+
+
+def test_a_saved_person_reward_plans_identically_on_both_paths(tmp_path):
+    """A reward file round trip does not change what the fast path computes."""
+    rng = np.random.default_rng(9)
+    reward = person_like_reward(rng)
+    loaded = load_reward(save_reward(reward, tmp_path / "r.yaml"))
+    scenario = load_scenario("oscillating_obstacle")
+    task = Task.from_scenario(scenario)
+    actions, start = rng.normal(size=(10, 2)) * 0.3, np.array([-2.0, 0.5, 0.2, 0.1, 0.0])
+    a = trajectory_reward(reward, Unicycle(0.4), task, start, 2.0, actions)
+    b = trajectory_reward(loaded, ReferenceUnicycle(0.4), task, start, 2.0, actions)
+    assert a[0] == pytest.approx(b[0], abs=1e-10)
+    np.testing.assert_allclose(a[1], b[1], atol=1e-9)
+
+
+def test_preferred_speed_is_where_the_linear_and_squared_speed_terms_peak():
+    features = person_features()
+    weights = np.zeros(len(features.names))
+    named = dict(goal_progress=60.0, speed_squared=-80.0, speed_effort=-20.0, turn_squared=-5.0)
+    for name, value in named.items():
+        weights[list(features.names).index(name)] = value
+    reward = LinearReward(weights, features)
+    # 60 v - 100 v^2 peaks at v = 60 / 200
+    assert preferred_speed(reward, 0.6) == pytest.approx(0.3)
+    assert preferred_speed(CollisionBarrier(reward, 0.45), 0.6) == pytest.approx(0.3)
+    assert preferred_speed(reward, 0.25) == 0.25                     # never above the limit
+    weights[list(features.names).index("goal_progress")] = 0.0
+    assert preferred_speed(LinearReward(weights, features), 0.6) == 0.6     # no pull: the limit
+    # no speed features at all: the limit
+    assert preferred_speed(LinearReward(np.ones(len(FeatureSet().names)), FeatureSet()), 0.5) == 0.5
+    with pytest.raises(LfdError, match="linear reward"):
+        preferred_speed(object(), 0.6)
+
+
+def test_the_arrival_look_ahead_ends_about_at_arrival_at_the_preferred_speed():
+    features = person_features()
+    weights = np.zeros(len(features.names))
+    for name, value in dict(goal_progress=50.0, speed_squared=-100.0, goal_heading=1.0).items():
+        weights[list(features.names).index(name)] = value
+    reward = LinearReward(weights, features)       # preferred speed 50 / 200 = 0.25 m/s
+    task = Task(np.array([0.0, 0.0]), lambda t: np.tile([10.0, 10.0], np.shape(t) + (1,)))
+    controller = RecedingHorizonController(reward, Unicycle(0.1), horizon=20, plan_dt=0.4,
+                                           min_horizon=8, max_iter=3, seed_iter=0)
+    # 0.1 m per 0.4 s step: 3.05 m -> ceil(30.5) + 2 = 33, clipped to 20; 1.25 m -> 13 + 2 = 15;
+    # 0.3 m -> 3 + 2 = 5, raised to 8
+    for distance, steps in ((3.05, 20), (1.25, 15), (0.3, 8)):
+        state = np.array([-distance, 0.0, 0.0, 0.2, 0.0])
+        assert controller.planning_steps(state, task) == steps
+        controller.act(state, 0.0, task)
+        assert controller.steps_ == steps and controller.plan_.shape == (steps, 2)
+    # the warm start follows the length: 8 -> 15 steps pads with the last command, 0.4 s later
+    last = controller.plan_.copy()
+    controller.steps_ = 15
+    warm = controller._warm_start(0.4)
+    np.testing.assert_allclose(warm[:7], last[1:8])
+    np.testing.assert_allclose(warm[7:], np.tile(last[-1], (8, 1)))
+    fixed = RecedingHorizonController(reward, Unicycle(0.1), horizon=20, plan_dt=0.4)
+    assert fixed.planning_steps(np.array([-0.3, 0.0, 0.0, 0.0, 0.0]), task) == 20
+    with pytest.raises(LfdError, match="min_horizon"):
+        RecedingHorizonController(reward, Unicycle(0.1), horizon=20, min_horizon=25)
+    with pytest.raises(LfdError, match="linear reward"):
+        RecedingHorizonController(object(), Unicycle(0.1), min_horizon=8)
