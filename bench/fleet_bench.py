@@ -15,7 +15,9 @@ steady state (messages received after the first 5 s of run 1 and more than CUT_G
 before the partition), whether replication kept up in the steady state (central arrivals /
 messages received there), catch-up time = from the central restart until every message received
 before it is central (faster than real time when below `--partition`), and the direct run's
-figures with ratios. Targets (issue 13): 0 lost, steady-state lag p99 < 5 s, catch-up <
+figures with ratios, and the CPU each kind of process used in the steady state of both runs
+(cores: robot stores, recorders and replicators, publishers, the central store, the whole
+machine). Targets (issue 13): 0 lost, steady-state lag p99 < 5 s, catch-up <
 partition. Printed, written to artifacts/bench/fleet.json, plot artifacts/bench/fleet_lag.png.
 
     scripts/in_env.sh python bench/fleet_bench.py                 # 60 s + 60 s partition
@@ -25,6 +27,7 @@ import argparse
 import bisect
 import json
 import math
+import os
 import re
 import shutil
 import struct
@@ -38,6 +41,9 @@ import numpy as np
 import requests
 
 from ros_harness import LaunchSet, ManagedProcess, PouchDBServer, RosCore, wait_until
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from ros_mongo_bench_lib import CpuWatch  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 RATES = {"/odom": 100.0, "/scan": 10.0, "/camera/rgb/image_raw": 5.0}
@@ -233,14 +239,14 @@ class Robot:
     def start_fleet(self, central_url):
         self.store = PouchDBServer(self.work / "store").start()
         self.url = self.store.database_url("robot_data")
-        self.launches(str(ROOT / "launch" / "fleet.launch"), central_url=central_url,
+        self.nodes = self.launches(str(ROOT / "launch" / "fleet.launch"), central_url=central_url,
                       robot_id=self.robot_id, local_db="false", local_db_port=self.store.port,
                       topics=TOPICS, local_topics=_yaml_list(self.local_topics),
                       spool_path=str(self.work / "spool"))
 
     def start_direct(self, central_db_url):
         topics = [t for t in RATES if t not in self.local_topics]  # what central gets either way
-        self.launches("ros_mongo", "ros_mongo_server.launch", db_url=central_db_url,
+        self.nodes = self.launches("ros_mongo", "ros_mongo_server.launch", db_url=central_db_url,
                       robot_id=self.robot_id, topics=_yaml_list(topics),
                       spool_path=str(self.work / "spool_direct"))
 
@@ -286,6 +292,48 @@ def _progress(what, watch, expected=None):
     print(f"  {time.strftime('%H:%M:%S')} {what}: {watch.count()}{total} messages central", flush=True)
 
 
+class SteadyCpu:
+    """CPU used in the steady state, in cores (CPU seconds / wall seconds), by kind of process
+    (every robot's local store, its roslaunch tree of recorder and replicator, its publisher; the
+    central store) and by the whole machine (/proc/stat), between `start()` and `stop()`."""
+
+    def __init__(self, robots, central):
+        self.watch = CpuWatch(period=0.5)
+        self.kinds = {"central store": ["central"]}
+        if central is not None:
+            self.watch.add("central", central.process.pid)
+        for robot in robots:
+            for kind, name, pid in (("robot stores", f"store {robot.robot_id}",
+                                     robot.store.process.pid if robot.store else None),
+                                    ("recorders and replicators (roslaunch trees)",
+                                     f"nodes {robot.robot_id}", robot.nodes.process.pid),
+                                    ("publishers", f"publisher {robot.robot_id}", robot.publisher.pid)):
+                if pid is not None:
+                    self.watch.add(name, pid)
+                    self.kinds.setdefault(kind, []).append(name)
+
+    def start(self):
+        self.watch.mark("start")
+        self.began, self.machine = time.time(), _machine_jiffies()
+
+    def stop(self) -> dict:
+        self.watch.sample()
+        seconds = time.time() - self.began
+        busy, total = (b - a for a, b in zip(self.machine, _machine_jiffies()))
+        figures = {kind: sum(self.watch.cpu(name, "start") for name in names) / seconds
+                   for kind, names in self.kinds.items()}
+        figures["whole machine"] = busy / total * (os.cpu_count() or 1) if total else None
+        self.watch.close()
+        return {"seconds": seconds, "cores": figures}
+
+
+def _machine_jiffies():
+    """(busy, total) jiffies of all CPUs since boot (/proc/stat; idle and iowait are not busy)."""
+    with open("/proc/stat") as stat:
+        values = [int(v) for v in stat.readline().split()[1:]]
+    return sum(values) - values[3] - values[4], sum(values)
+
+
 def run_replicated(work: Path, robots_n: int, duration: float, partition: float, tail: float,
                    local_topics=()):
     central = PouchDBServer(work / "central").start()
@@ -301,9 +349,13 @@ def run_replicated(work: Path, robots_n: int, duration: float, partition: float,
         for robot in robots:
             robot.publish(total)
         t0 = time.time()
+        cpu = SteadyCpu(robots, central)
         while time.time() - t0 < duration:
             time.sleep(5)  # progress display while the steady state runs
             _progress("steady", watch)
+            if not hasattr(cpu, "began"):
+                cpu.start()  # the steady state: from 5 s after the start to the cut
+        steady_cpu = cpu.stop()
         central.stop()
         t_cut = time.time()
         print(f"  {time.strftime('%H:%M:%S')} central stopped for {partition:.0f} s", flush=True)
@@ -337,6 +389,7 @@ def run_replicated(work: Path, robots_n: int, duration: float, partition: float,
             "central_msgs_per_s_overall": stored / (last - first) if last > first else None,
             "timeline": [(a - t0, a - r) for a, r, _ in sorted(arrivals)][::5],
             "cut_at": t_cut - t0, "heal_at": t_heal - t0,
+            "steady_cpu": steady_cpu,
         }
         return result
     finally:
@@ -369,6 +422,11 @@ def run_direct(work: Path, robots_n: int, duration: float, local_topics=()):
         for robot in robots:  # nobody subscribes to a local topic in this run
             robot.publish(duration, [t for t in RATES if t not in local_topics])
         t0 = time.time()
+        cpu = SteadyCpu(robots, central)
+        time.sleep(5)  # the same steady window as the replicated run: from 5 s ...
+        cpu.start()
+        time.sleep(max(0.0, duration - 7))  # ... to shortly before publishing ends
+        steady_cpu = cpu.stop()
         wait_until(lambda: not any(r.publisher.alive for r in robots), duration + 600,
                    what="publishers done")
         published = sum(r.published() for r in robots)
@@ -378,7 +436,8 @@ def run_direct(work: Path, robots_n: int, duration: float, local_topics=()):
         first, last = min(a for a, *_ in arrivals), max(a for a, *_ in arrivals)
         return {"published": published, "central": len(arrivals),
                 "lost": published - len(arrivals), "lag_s": _percentiles(lags),
-                "central_msgs_per_s_overall": len(arrivals) / (last - first) if last > first else None}
+                "central_msgs_per_s_overall": len(arrivals) / (last - first) if last > first else None,
+                "steady_cpu": steady_cpu}
     finally:
         for robot in robots:
             robot.close()
@@ -450,6 +509,10 @@ def main() -> int:
     print(json.dumps({"replicated": shown, "direct": direct,
                       **{k: v for k, v in result.items() if k.endswith("_direct") or
                          k.endswith("direct_rate")}}, indent=1))
+    for run, figures in (("replicated", replicated), ("direct", direct)):
+        cores = figures["steady_cpu"]["cores"]
+        print(f"CPU in the steady state, {run} run (cores of {os.cpu_count()}): " + ", ".join(
+            f"{kind} {value:.2f}" for kind, value in cores.items() if value is not None))
     ok = (replicated["lost"] == 0 and direct["lost"] == 0
           and (replicated["steady_lag_s"]["p99"] or 1e9) < 5.0
           and (replicated["catch_up_s"] if replicated["catch_up_s"] is not None else 1e9) < partition)
