@@ -26,8 +26,10 @@ ALL_FEATURES = dict(forward_command=True, obstacle_facing=True, goal_slowing=Tru
 
 
 class ReferenceUnicycle(Unicycle):
-    """The same robot; not exactly Unicycle, so trajectory_reward takes its generic path
+    """The same robot without `rollout_partials`, so trajectory_reward takes its generic path
     (rollout + step_derivatives + dense adjoint)."""
+
+    rollout_partials = None
 
 
 def random_trajectory(rng, count):

@@ -255,16 +255,14 @@ class FeatureSet:
                              control, control_jac, control_hess)
 
     def weighted_first_order(self, states, actions, times, task: Task, state_weights,
-                             control_weights, obstacles: Optional[np.ndarray] = None):
+                             control_weights):
         """(w_s . phi + w_c . psi (T,), its gradient in the state (T, 5) and in the action (T, 2)):
         what planning needs from a linear reward, written out by hand (no jets; features whose
-        weight is 0 are skipped). `evaluate` is the reference it is tested against.
-        `obstacles` (T, 2): the obstacle's positions at `times` when the caller has them."""
+        weight is 0 are skipped). `evaluate` is the reference it is tested against."""
         states = np.atleast_2d(np.asarray(states, float))
         actions = np.atleast_2d(np.asarray(actions, float))
         times = np.atleast_1d(np.asarray(times, float))
-        if obstacles is None:
-            obstacles = np.asarray(task.obstacle_position(times), float).reshape(-1, 2)
+        obstacles = np.asarray(task.obstacle_position(times), float).reshape(-1, 2)
         weights = dict(zip(self.state_names, np.asarray(state_weights, float)))
         value, grad = _weighted_state_features(self, weights, states, times, task, obstacles)
         control_weights = np.asarray(control_weights, float)

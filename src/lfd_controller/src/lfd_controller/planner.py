@@ -13,7 +13,7 @@ from scipy.optimize import minimize
 
 from lfd_controller.errors import LfdError
 from lfd_controller.features import Task
-from robot_common.unicycle import Unicycle
+from robot_common.unicycle import rollout_adjoint
 
 COMMAND_BOUND = 1.5   # commands are bounded to 1.5 x the limits (the smooth limit gives ~96% there)
 # Steps an arrival look-ahead (RecedingHorizonController min_horizon > 0) keeps beyond the arrival
@@ -56,8 +56,8 @@ def trajectory_reward(reward, model, task: Task, start, t0: float, actions, *, g
         if discount != 1.0:
             values = values * discount ** np.arange(count)
         return float(values.sum() + terminal * values[-1]), None
-    if type(model) is Unicycle:
-        states, partials = unicycle_rollout_partials(model, start, actions)
+    if getattr(model, "rollout_partials", None) is not None:    # the unicycle's sparse path
+        states, partials = model.rollout_partials(start, actions)
     else:
         states, partials = model.rollout(start, actions), None
     rd = reward.derivatives(states, actions, times, task, order=1)
@@ -70,7 +70,7 @@ def trajectory_reward(reward, model, task: Task, start, t0: float, actions, *, g
         factor = discount ** np.arange(count)
         rd.value, rd.rx, rd.ru = rd.value * factor, rd.rx * factor[:, None], rd.ru * factor[:, None]
     if partials is not None:
-        return float(rd.value.sum()), unicycle_adjoint(model.dt, partials, rd.rx, rd.ru)
+        return float(rd.value.sum()), rollout_adjoint(model.dt, partials, rd.rx, rd.ru)
     previous = np.vstack([start, states[:-1]])
     _, a_mats, b_mats, _ = model.step_derivatives(previous, actions, second=False)
     lam = rd.rx[-1].copy()
@@ -80,61 +80,6 @@ def trajectory_reward(reward, model, task: Task, start, t0: float, actions, *, g
             lam = rd.rx[t] + a_mats[t + 1].T @ lam
         grad[t] = rd.ru[t] + b_mats[t].T @ lam
     return float(rd.value.sum()), grad
-
-
-def unicycle_rollout_partials(model: Unicycle, start, actions):
-    """States x_1..x_T (T, 5) and, per step, the nonzero first derivatives of the unicycle step
-    (robot_common.unicycle): (cos yaw', sin yaw', v', dv'/dv, dv'/dv_cmd, dw'/dw, dw'/dw_cmd).
-    A scalar loop: for a planning horizon of tens of steps far cheaper than step_derivatives
-    (tested against it)."""
-    lim, dt = model.limits, model.dt
-    a_step, b_step = lim.a_max * dt, lim.alpha_max * dt
-    px, py, yaw, v, w = (float(value) for value in np.asarray(start, float))
-    states, partials = [], []
-    for v_cmd, w_cmd in np.asarray(actions, float).tolist():
-        v_sat, v_sat_d = _saturate_scalar(v_cmd, lim.v_max)
-        v_change, v_change_d = _saturate_scalar(v_sat - v, a_step)
-        w_sat, w_sat_d = _saturate_scalar(w_cmd, lim.w_max)
-        w_change, w_change_d = _saturate_scalar(w_sat - w, b_step)
-        v += v_change
-        w += w_change
-        yaw += dt * w
-        cos, sin = math.cos(yaw), math.sin(yaw)
-        px += dt * v * cos
-        py += dt * v * sin
-        states.append((px, py, yaw, v, w))
-        partials.append((cos, sin, v, 1.0 - v_change_d, v_change_d * v_sat_d, 1.0 - w_change_d,
-                         w_change_d * w_sat_d))
-    return np.array(states).reshape(-1, 5), partials
-
-
-def _saturate_scalar(z: float, limit: float):
-    """S(z) = z / (1 + (z/limit)^4)^(1/4) and S'(z) (robot_common.unicycle.saturate)."""
-    s = z / limit
-    base = 1.0 + s * s * s * s
-    root = math.sqrt(math.sqrt(base))
-    return z / root, 1.0 / (base * root)
-
-
-def unicycle_adjoint(dt: float, partials, rx, ru) -> np.ndarray:
-    """dR/dU (T, 2) by the adjoint pass over the unicycle's sparse step Jacobians: lambda_t =
-    r_x,t + A_{t+1}^T lambda_{t+1}, g_t = r_u,t + B_t^T lambda_t."""
-    count = len(partials)
-    grad = np.asarray(ru, float).tolist()
-    rx = np.asarray(rx, float).tolist()
-    lx = ly = lyaw = lv = lw = 0.0            # A_{t+1}^T lambda_{t+1} (0 after the last step)
-    for t in range(count - 1, -1, -1):
-        lx, ly, lyaw, lv, lw = (lx + rx[t][0], ly + rx[t][1], lyaw + rx[t][2], lv + rx[t][3],
-                                lw + rx[t][4])
-        cos, sin, v, v_v, v_cmd, w_w, w_cmd = partials[t]
-        # sensitivities to this step's new yaw, v, w through the position update
-        q_yaw = lyaw + dt * v * (ly * cos - lx * sin)
-        q_v = lv + dt * (lx * cos + ly * sin)
-        q_w = lw + dt * q_yaw
-        grad[t][0] += q_v * v_cmd
-        grad[t][1] += q_w * w_cmd
-        lyaw, lv, lw = q_yaw, q_v * v_v, q_w * w_w     # A_t^T lambda_t (px, py pass through)
-    return np.array(grad)
 
 
 def command_bounds(model, count: int):
