@@ -57,7 +57,8 @@ def run_map(spec: str, args) -> dict:
           f"{len(test)} test rows ({time.perf_counter() - start:.0f} s)", flush=True)
     model = TrafficGP(n_inducing=args.inducing, n_steps=args.steps, progress=True,
                       spatial_inputs=args.spatial_inputs).fit(train, cells=sim.cells)
-    print(f"  GP trained: {model.n_steps_} steps in {model.train_seconds_:.0f} s", flush=True)
+    print(f"  GP trained: {model.n_steps_} steps (best {model.best_step_}, anneal from "
+          f"{model.anneal_start_}) in {model.train_seconds_:.0f} s", flush=True)
     models = {"gp": model}
     chosen = tc.choose_baselines(sim.cells, train)
     models.update({key: value["model"] for key, value in chosen.items()})
@@ -67,6 +68,8 @@ def run_map(spec: str, args) -> dict:
     halls = sim.layout.hall >= 0
     result = {"cells": sim.cells.n_cells, "train_views": len(train_views), "train_rows": len(train),
               "test_rows": len(test), "train_seconds": model.train_seconds_,
+              "steps": model.n_steps_, "best_step": model.best_step_,
+              "anneal_start": model.anneal_start_,
               "baseline_settings": {k: v["setting"] for k, v in chosen.items()},
               "baseline_validation": {k: v["validation"] for k, v in chosen.items()}}
     busy = models["truth"].predict(test.x, test.y, test.t, test.exposure) >= 0.1

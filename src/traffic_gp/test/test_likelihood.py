@@ -93,6 +93,9 @@ def test_training_stops_on_the_held_out_rows_and_keeps_the_best_state():
     model = TrafficGP(n_inducing=10, hourly=False, n_steps=5000, batch_size=256, eval_every=20,
                       patience=3, random_state=0).fit(train)
     assert model.stopped_early_ and model.n_steps_ < 5000
+    # the plateau started the anneal (scheduled at step 3000) early, and fit ran it to its end
+    assert model.anneal_start_ is not None and model.anneal_start_ < 3000
+    assert model.n_steps_ >= model.anneal_start_ + 0.4 * 5000
     assert len(model.validation_loss_) == len(model.eval_steps_) == len(model.elbo_)
     losses, lowest = np.array(model.validation_loss_), min(model.validation_loss_)
     ties = np.nonzero(losses <= lowest + 1e-3 * abs(lowest))[0]    # the documented tie rule

@@ -6,14 +6,18 @@ dispersion r (`likelihood="negbin"`, the default: real counts are overdispersed)
 Poisson(exposure * exp(f)) (`likelihood="poisson"`). Kernel: space x daily cycle, plus
 (`hourly=True`) space x hourly cycle x daily envelope for the rush before the hour, plus
 (`weekly=True`) space x weekly cycle. Training: minibatches, natural gradients for q(u) and Adam
-for the hyperparameters, both step sizes lowered tenfold over the last 40 % of a `fit`.
+for the hyperparameters, both step sizes lowered tenfold over the last 40 % of a `fit` (or
+from the first validation plateau, whichever comes first).
 
 `fit` holds out `validation_fraction` of the rows (at random, seeded): every `eval_every` steps
 it records the ELBO on a fixed sample of training rows (`elbo_`, at `eval_steps_`) and the mean
-negative log predictive density of the held-out rows (`validation_loss_`); it stops once the
-validation loss has not improved for `patience` evaluations after the warm-up and returns the
-parameters of the best evaluation (`best_step_`; of evaluations within 0.1 % of the best loss,
-the latest, the most converged one): `n_steps` is a maximum, not a fixed cost.
+negative log predictive density of the held-out rows (`validation_loss_`). When the validation
+loss has not improved for `patience` evaluations after the warm-up, the step-size anneal (both
+step sizes lowered tenfold over ANNEAL_SHARE of `n_steps`) starts there if it has not started yet
+(`anneal_start_`: at full step size the minibatch jitter hides slow progress in the rate), and
+`fit` stops at the first such plateau once the anneal is over. It returns the parameters of the
+best evaluation (`best_step_`; of evaluations within 0.1 % of the best loss, the latest, the most
+converged one): `n_steps` is a maximum, not a fixed cost.
 Spatial inputs (`spatial_inputs`): "xy" puts the kernel on map coordinates, so a busy hall's
 rate leaks through a wall into the room behind it; "geodesic" puts it on a
 `geodesic.GeodesicEmbedding` of the map's free cells (distances through free space), made by
@@ -188,7 +192,7 @@ class TrafficGP(LatentPredictions):
             likelihood=self.likelihood)
         self.n_steps_, self.train_seconds_, self.compile_seconds_ = 0, 0.0, 0.0
         self.elbo_, self.eval_steps_, self.validation_loss_ = [], [], []
-        self.best_step_, self.stopped_early_ = None, False
+        self.best_step_, self.stopped_early_, self.anneal_start_ = None, False, None
         self._trainer = None
         self._train(self.n_steps if n_steps is None else n_steps, anneal=True,
                     early_stopping=len(self._validation_rows) > 0)
@@ -254,8 +258,13 @@ class TrafficGP(LatentPredictions):
         if fresh and n_steps:     # tracing the compiled functions takes seconds: timed apart
             self._trainer.elbo(inputs[:2], targets[:2])
         best, best_loss, done, improved_at = None, np.inf, 0, 0
+        anneal_steps = max(int(round(ANNEAL_SHARE * n_steps)), 1)
+        anneal_start = n_steps - anneal_steps if anneal else None
         for step in steps:
-            self._set_rates(self.n_steps_ + step, step / max(n_steps, 1) if anneal else 0.0)
+            annealed = 0.0
+            if anneal_start is not None:
+                annealed = min(max((step - anneal_start) / anneal_steps, 0.0), 1.0)
+            self._set_rates(self.n_steps_ + step, annealed)
             batch = self._rng.integers(0, len(data), size)
             self._trainer.step(inputs[batch], targets[batch])
             self._trainer_steps += 1
@@ -279,10 +288,16 @@ class TrafficGP(LatentPredictions):
                 self.best_step_ = self.n_steps_ + done
             elif (self.n_steps_ + done > WARMUP_STEPS
                   and self.n_steps_ + done - improved_at >= self.patience * self.eval_every):
-                self.stopped_early_ = True
-                break
+                if anneal_start is not None and done < anneal_start:    # plateau: anneal now
+                    anneal_start = done
+                    anneal_steps = max(min(anneal_steps, n_steps - done), 1)
+                elif anneal_start is None or done >= anneal_start + anneal_steps:
+                    self.stopped_early_ = True
+                    break
         if hasattr(steps, "close"):
             steps.close()
+        if anneal_start is not None and anneal_start < done:
+            self.anneal_start_ = self.n_steps_ + anneal_start
         self.n_steps_ += done
         if best is not None:
             gp_parts.assign_parameter_values(self.model_, best)
@@ -292,18 +307,17 @@ class TrafficGP(LatentPredictions):
                         "natgrad_gamma", self.n_steps_)
         return self
 
-    def _set_rates(self, done: int, progress: float) -> None:
+    def _set_rates(self, done: int, annealed: float) -> None:
         """Natural-gradient steps grow 100x over the first WARMUP_STEPS of training; both step
         sizes also grow linearly over the first ADAM_WARMUP_STEPS of a new optimiser (after
         `load`: a fresh Adam's first steps have the full step size in every direction whatever
         the gradient, and full natural-gradient steps on a minibatch would shake the model);
-        in the last ANNEAL_SHARE of a fit both step sizes shrink 10x (less minibatch jitter)."""
+        over a fit's anneal (`annealed` goes from 0 to 1) both step sizes shrink 10x (less
+        minibatch jitter)."""
         warm = 10.0 ** (-2.0 * (1.0 - done / WARMUP_STEPS)) if done < WARMUP_STEPS else 1.0
         adam_warm = min(1.0, (self._trainer_steps + 1) / ADAM_WARMUP_STEPS)
         warm = min(warm, adam_warm)         # a loaded model's first natural-gradient steps too
-        anneal = 1.0
-        if progress > 1.0 - ANNEAL_SHARE:
-            anneal = 10.0 ** (-(progress - 1.0 + ANNEAL_SHARE) / ANNEAL_SHARE)
+        anneal = 10.0 ** -annealed
         self._trainer.gamma.assign(self.natgrad_gamma * warm * anneal)
         self._trainer.adam.learning_rate.assign(self.learning_rate * anneal * adam_warm)
 
@@ -377,6 +391,6 @@ class TrafficGP(LatentPredictions):
         self.elbo_ = [header["elbo"]] if header["elbo"] is not None else []
         self.eval_steps_ = [self.n_steps_] if self.elbo_ else []
         self.validation_loss_, self.best_step_ = [], header.get("best_step")
-        self.stopped_early_, self._train_rows = False, None
+        self.stopped_early_, self.anneal_start_, self._train_rows = False, None, None
         self.meta_ = header["meta"]
         self._trainer = None
