@@ -9,9 +9,11 @@ synthetic expert (sanity), with CIOC (Levine and Koltun 2012).
    windows from the recorded states, Gauss-Newton Hessian, learned command noise), driven by the
    receding-horizon controller (learning.PERSON_CONTROLLER: up to 8 s look-ahead, ending about
    at arrival at the reward's preferred speed (at least 3.2 s), detour seeds, one alternative seed
-   per cycle, discount 0.97 per step; cycle budget 100 ms) on
-   held-out starts (100; --quick 10) with planner.CollisionBarrier (a fixed, not learned, penalty
-   inside robot + obstacle radius + 0.1 m) added to the learned reward; behaviour cloning tuned
+   per cycle, discount 0.97 per step, absorbing goal region 0.25 m with a per-step time cost before
+   arrival derived from the reward (planner.ArrivalReward); cycle budget 100 ms) on
+   held-out starts (100; --quick 10; --heldout-seed 5: the validation starts) with
+   planner.CollisionBarrier (a fixed, not learned, penalty inside robot + obstacle radius + 0.1 m)
+   added to the learned reward; behaviour cloning tuned
    on validation starts (size, L2 regularisation, three initialisations; clean + DART
    noise-injected drives); the driver's own success on the same starts as the reference
    ceiling. Two obstacle/goal layouts no demo showed are driven with the reward and the clone
@@ -60,6 +62,7 @@ from lfd_controller.plots import plot_demonstrations, plot_reward_field, plot_tr
 from robot_sim.scenarios import load_scenario, run_episode  # noqa: E402
 
 OUT = Path(__file__).resolve().parent.parent / "artifacts" / "bench"
+TEST_SEED = 4         # held-out test starts of the person rows; 5 = validation starts (BC tuning)
 
 
 def cosine(a, b):
@@ -282,15 +285,17 @@ def people(args, results):
         cases = [(load_scenario(n), n) for n in learned] + [(s, "static_obstacle") for s in layouts]
         for scenario, source in cases:
             reward, clone, info = learned[source]
-            starts = scenario.sample_starts(runs, seed=4)
+            starts = scenario.sample_starts(runs, seed=args.heldout_seed)
             row = {"group": group, "scenario": scenario.name, "learned_on": source, "runs": runs,
+                   "heldout_seed": args.heldout_seed,
                    "learn": {k: v for k, v in info.items() if k != "bc_validation"}}
             cioc = controller_episodes(reward, scenario, starts, f"cioc {group}/{scenario.name}",
                                        cycle_times)
             row["driver"] = outcome_of(driver_reference(scenario, group, starts, 900))
             row["cioc"] = outcome_of(cioc)
             row["behaviour_cloning"] = outcome_of(clone_episodes(clone, scenario, starts))
-            plot_trajectories(cioc, scenario, OUT / f"lfd_people_{group}_{scenario.name}_cioc.png",
+            plot_trajectories(cioc, scenario,
+                              OUT / f"lfd_people_{group}_{scenario.name}_cioc{suffix(args)}.png",
                               title=f"CIOC, {group} demos ({scenario.name})")
             d, c, b = row["driver"], row["cioc"], row["behaviour_cloning"]
             row["targets"] = {"success_90": c["success"] >= 0.9,
@@ -315,7 +320,7 @@ def people(args, results):
         print(f"  controller cycle (person rewards, {len(cycle)} cycles): mean {cycle.mean():.1f} ms, "
               f"p95 {np.percentile(cycle, 95):.1f} ms, p99 {np.percentile(cycle, 99):.1f} ms, max "
               f"{cycle.max():.1f} ms, {np.mean(cycle > 100.0):.1%} over the 100 ms budget", flush=True)
-    plot_people(rows)
+    plot_people(rows, suffix(args))
     if not args.quick or args.learn_time:
         scenario = load_scenario("static_obstacle")
         starts = scenario.sample_starts(16, seed=6)
@@ -328,7 +333,13 @@ def people(args, results):
               f"{seconds:.1f} s (target < 60 s)", flush=True)
 
 
-def plot_people(rows):
+def suffix(args) -> str:
+    """"_seed<N>" for held-out starts other than the test starts (seed 4), so a validation run
+    does not overwrite the test run's figures and JSON."""
+    return "" if args.heldout_seed == TEST_SEED else f"_seed{args.heldout_seed}"
+
+
+def plot_people(rows, tag=""):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -349,7 +360,7 @@ def plot_people(rows):
     ax.set_title("learning from person-like demonstrators (held-out starts)")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(OUT / "lfd_people.png", dpi=110)
+    fig.savefig(OUT / f"lfd_people{tag}.png", dpi=110)
     plt.close(fig)
 
 
@@ -363,9 +374,14 @@ def main(argv=None) -> int:
                         help="with --quick: also time learning 16 mixed person demos")
     parser.add_argument("--styles", nargs="*", choices=sorted(STYLES) + ["mixed"],
                         help="person-like groups to run (default: all styles and mixed)")
+    parser.add_argument("--heldout-seed", type=int, default=TEST_SEED,
+                        help=f"seed of the starts the person rows are driven from (default "
+                             f"{TEST_SEED}: the held-out test starts; 5: the validation starts, for "
+                             f"choosing settings; other seeds write *_seed<N> outputs)")
     args = parser.parse_args(argv)
     OUT.mkdir(parents=True, exist_ok=True)
-    results = {"quick": args.quick, "load_average_start": os.getloadavg()[0]}
+    results = {"quick": args.quick, "heldout_seed": args.heldout_seed,
+               "load_average_start": os.getloadavg()[0]}
     started = time.monotonic()
     if args.only in (None, "people"):
         print("person-like demonstrators (held-out starts; driver = the demonstrators' own success):",
@@ -379,7 +395,8 @@ def main(argv=None) -> int:
         behaviour(args, results)
     results["seconds"] = time.monotonic() - started
     results["load_average_end"] = os.getloadavg()[0]
-    name = "lfd_bench" + (f"_{args.only}" if args.only else "") + ("_quick" if args.quick else "") + ".json"
+    name = ("lfd_bench" + (f"_{args.only}" if args.only else "") + ("_quick" if args.quick else "")
+            + suffix(args) + ".json")
     (OUT / name).write_text(json.dumps(results, indent=2))
     print(f"results in {OUT / name} ({results['seconds']:.0f} s; load average "
           f"{results['load_average_start']:.1f} -> {results['load_average_end']:.1f})")

@@ -1,7 +1,7 @@
 """The planner's fast paths against their slow references: the hand-written first-order features
 against the jets, the unicycle adjoint against step_derivatives and finite differences; plus the
-discount, the deadline, the spread seeds and the arrival look-ahead of the receding-horizon
-controller."""
+discount, the deadline, the spread seeds, the arrival look-ahead and the absorbing goal region of
+the receding-horizon controller."""
 import time
 
 import numpy as np
@@ -11,8 +11,10 @@ from lfd_controller.errors import LfdError
 from lfd_controller.features import FeatureSet, Task
 from lfd_controller.learning import load_reward, person_features, save_reward
 from lfd_controller.planner import (
+    ArrivalReward,
     CollisionBarrier,
     RecedingHorizonController,
+    arrival_time_cost,
     optimise_commands,
     preferred_speed,
     trajectory_reward,
@@ -198,3 +200,139 @@ def test_the_arrival_look_ahead_ends_about_at_arrival_at_the_preferred_speed():
         RecedingHorizonController(reward, Unicycle(0.1), horizon=20, min_horizon=25)
     with pytest.raises(LfdError, match="linear reward"):
         RecedingHorizonController(object(), Unicycle(0.1), min_horizon=8)
+
+
+def far_obstacle(t):
+    return np.tile([10.0, 10.0], np.shape(t) + (1,))
+
+
+def test_the_arrival_reward_is_the_goals_rest_value_inside_the_region_and_the_reward_outside():
+    features = FeatureSet()            # goal_distance softened by 0.2 m, squared commands
+    weights = np.zeros(len(features.names))
+    weights[list(features.names).index("goal_distance")] = -2.0
+    weights[list(features.names).index("speed_effort")] = -3.0
+    task = Task(np.array([1.0, 2.0]), far_obstacle)
+    arrival = ArrivalReward(LinearReward(weights, features), 0.25, band=0.1)
+    # goal distances 0.1 (inside the band: all the goal's value), 0.25 (the region's edge: half),
+    # 0.27 (z = (0.30 - 0.27) / 0.1 = 0.3: 3 z^2 - 2 z^3 = 0.216), 0.5 (outside: the reward)
+    distances = np.array([0.1, 0.25, 0.27, 0.5])
+    states = np.column_stack([1.0 - distances, np.full(4, 2.0), np.full(4, 0.3), np.full(4, 0.2),
+                              np.zeros(4)])
+    actions = np.tile([0.4, 0.3], (4, 1))
+
+    def own(d):             # -2 (sqrt(d^2 + 0.2^2) - 0.2) - 3 x 0.4^2; at rest at the goal: 0
+        return -2.0 * (np.sqrt(d * d + 0.04) - 0.2) - 0.48
+    expected = [0.0, 0.5 * own(0.25), (1.0 - 0.216) * own(0.27), own(0.5)]
+    value = arrival.derivatives(states, actions, np.zeros(4), task, order=1).value
+    np.testing.assert_allclose(value, expected, atol=1e-12)
+    np.testing.assert_allclose(arrival.weight(distances)[0], [1.0, 0.5, 0.216, 0.0], atol=1e-12)
+    # a time cost is paid by every step before arrival, not by the goal's value
+    priced = ArrivalReward(arrival.reward, 0.25, band=0.1, time_cost=1.5)
+    value = priced.derivatives(states, actions, np.zeros(4), task, order=1).value
+    np.testing.assert_allclose(value, [0.0, 0.5 * (own(0.25) - 1.5), (1.0 - 0.216) * (own(0.27) - 1.5),
+                                       own(0.5) - 1.5], atol=1e-12)
+    with pytest.raises(LfdError, match="first derivatives"):
+        arrival.derivatives(states, actions, np.zeros(4), task, order=2)
+    with pytest.raises(LfdError, match="time cost"):
+        ArrivalReward(arrival.reward, 0.25, time_cost=-1.0)
+    with pytest.raises(LfdError, match="arrival radius"):
+        ArrivalReward(arrival.reward, 0.25, band=0.6)
+    with pytest.raises(LfdError, match="arrival radius"):
+        RecedingHorizonController(arrival.reward, Unicycle(0.1), arrival=-0.25)
+
+
+def test_the_arrival_time_cost_is_the_squared_speed_weight_times_the_preferred_speed_squared():
+    features = person_features()
+    weights = np.zeros(len(features.names))
+    weights[list(features.names).index("goal_progress")] = 60.0
+    weights[list(features.names).index("speed_squared")] = -100.0
+    reward = LinearReward(weights, features)
+    # v* = 60 / 200 = 0.3 m/s: 100 x 0.3^2 = 9; capped at v_max 0.25: 100 x 0.25^2 = 6.25
+    assert arrival_time_cost(reward, 0.6) == pytest.approx(9.0)
+    assert arrival_time_cost(CollisionBarrier(reward, 0.45), 0.25) == pytest.approx(6.25)
+    weights[list(features.names).index("speed_squared")] = 0.0
+    assert arrival_time_cost(LinearReward(weights, features), 0.6) == 0.0     # no speed penalty
+    with pytest.raises(LfdError, match="linear reward"):
+        arrival_time_cost(object(), 0.6)
+
+
+def test_the_arrival_reward_gradient_matches_finite_differences_across_the_region_edge():
+    rng = np.random.default_rng(11)
+    scenario = load_scenario("static_obstacle")
+    task = Task.from_scenario(scenario)
+    reward = ArrivalReward(CollisionBarrier(person_like_reward(rng), scenario.clearance), 0.25,
+                           time_cost=5.0)
+    model = Unicycle(0.4, scenario.model().limits)
+    start = np.array([0.6, 0.3, np.pi + 0.3, 0.2, 0.0])
+    actions = np.column_stack([rng.uniform(0.05, 0.3, 8), rng.uniform(-0.3, 0.3, 8)])
+    distances = np.hypot(*model.rollout(start, actions)[:, :2].T)
+    assert distances.max() > 0.3 and 0.2 < distances[(distances < 0.3)].max()   # crosses the edge
+    _, grad = trajectory_reward(reward, model, task, start, 0.0, actions, discount=0.97)
+    step, numeric = 1e-6, np.zeros_like(actions)
+    for index in np.ndindex(*actions.shape):
+        bump = np.zeros_like(actions)
+        bump[index] = step
+        numeric[index] = (trajectory_reward(reward, model, task, start, 0.0, actions + bump,
+                                            gradient=False, discount=0.97)[0]
+                          - trajectory_reward(reward, model, task, start, 0.0, actions - bump,
+                                              gradient=False, discount=0.97)[0]) / (2 * step)
+    np.testing.assert_allclose(grad, numeric, atol=1e-5 * np.abs(numeric).max())
+
+
+def test_an_absorbing_goal_arrives_where_effort_costs_make_the_plan_creep():
+    # A sporty person reward (weights as learned from the sporty static demos, rounded): turning
+    # is dear and the progress pull fades near the goal. 0.56 m before the goal, heading 32 deg
+    # off it at 0.15 m/s, the straight line passes 0.30 m from the goal: a 0.25 m region needs a
+    # small turn. Without an absorbing goal the plan creeps along (6.3 s to arrive, at 0.03 m/s);
+    # with it (steps after arrival cost nothing, steps before it arrival_time_cost) the robot
+    # turns in at speed.
+    features = person_features()
+    learned = dict(goal_distance=-8.6, obstacle_proximity=-3.9, goal_progress=70.0,
+                   speed_squared=-103.0, speed_effort=-2.5, turn_effort=-134.0)
+    reward = LinearReward(np.array([learned.get(n, 0.0) for n in features.names]), features)
+    task = Task(np.array([0.0, 0.0]), far_obstacle)
+    model = Unicycle(0.1)
+
+    def arrival_time(arrival):
+        controller = RecedingHorizonController(reward, model, horizon=20, plan_dt=0.4, terminal=0.0,
+                                               detour=0.8, spread_seeds=True, discount=0.97,
+                                               min_horizon=8, arrival=arrival)
+        state = np.array([-0.56, 0.0, 0.56, 0.15, 0.0])
+        for k in range(40):
+            state = model.step(state, controller.act(state, 0.1 * k, task))
+            if np.hypot(state[0], state[1]) < 0.25:
+                return 0.1 * (k + 1)
+        return None
+    assert arrival_time(0.0) is None                # no arrival within 4 s: the creep
+    arrived = arrival_time(0.25)
+    assert arrived is not None and arrived < 3.0
+
+
+def test_with_the_time_cost_the_robot_arrives_at_about_its_preferred_speed():
+    # A cautious person reward (rounded learned weights; v* = 110 / (2 x 206.6) = 0.266 m/s),
+    # facing the goal 1.5 m away at 0.27 m/s: the region's edge (0.25 m) is 1.25 m away, 4.7 s at
+    # v*. Without an absorbing goal the progress sum is the same however slowly it is made and
+    # the plan slows to 0.07 m/s (7.6 s); absorbing alone also drops the progress inside the
+    # region and is slower still (9.3 s); with arrival_time_cost it arrives in about 5 s.
+    features = person_features()
+    learned = dict(goal_distance=-4.7, goal_progress=110.0, speed_squared=-193.0,
+                   speed_effort=-13.6, turn_effort=-1.6, turn_squared=-11.7)
+    reward = LinearReward(np.array([learned.get(n, 0.0) for n in features.names]), features)
+    task = Task(np.array([0.0, 0.0]), far_obstacle)
+    model = Unicycle(0.1)
+
+    def arrival_time(arrival, absorbing_only=False):
+        controller = RecedingHorizonController(reward, model, horizon=20, plan_dt=0.4, terminal=0.0,
+                                               detour=0.8, spread_seeds=True, discount=0.97,
+                                               min_horizon=8, arrival=arrival)
+        if absorbing_only:
+            controller.reward = ArrivalReward(reward, arrival)
+        state = np.array([-1.5, 0.0, 0.0, 0.27, 0.0])
+        for k in range(100):
+            state = model.step(state, controller.act(state, 0.1 * k, task))
+            if np.hypot(state[0], state[1]) < 0.25:
+                return 0.1 * (k + 1)
+        return np.inf
+    assert arrival_time(0.25) <= 1.15 * 1.25 / 0.266            # within 15 % of 4.7 s
+    assert arrival_time(0.0) > 7.0                              # the crawl
+    assert arrival_time(0.25, absorbing_only=True) > 7.0

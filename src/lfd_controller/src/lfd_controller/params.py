@@ -92,15 +92,20 @@ class RewardControllerConfig(NodeConfig):
                                 "speed, at least this many steps and at most ~horizon (the plan "
                                 "ends near the goal instead of crawling into it); 0: always "
                                 "~horizon steps (person rewards: 8)")
+    arrival: float = param(0.0, "> 0: plan with an absorbing goal region of this radius (m; set "
+                                "it to ~goal_tolerance): a step after arrival is worth resting at "
+                                "the goal, no effort cost accrues there; 0: off (person rewards: "
+                                "0.25)")
     frame: str = param("odom", "frame of the published plan")
     enabled: bool = param(True, "drive from the start (service ~enable switches)")
     reward_settings: bool = param(True, "drive with the controller settings saved with the reward "
                                         "(learn_reward --kind person saves horizon, plan_dt, "
                                         "terminal, detour, spread_seeds, discount, "
-                                        "min_horizon, collision_margin) instead of these")
+                                        "min_horizon, arrival, collision_margin) instead of "
+                                        "these")
 
     SAVED_SETTINGS = ("horizon", "plan_dt", "terminal", "detour", "spread_seeds", "discount",
-                      "min_horizon", "collision_margin")
+                      "min_horizon", "arrival", "collision_margin")
 
     def check(self) -> None:
         if not self.rate > 0:
@@ -114,6 +119,8 @@ class RewardControllerConfig(NodeConfig):
         if self.min_horizon != 0 and not 2 <= self.min_horizon <= self.horizon:
             raise ConfigError(f"~min_horizon must be 0 or in [2, ~horizon={self.horizon}], "
                               f"got {self.min_horizon!r}")
+        if self.arrival < 0:
+            raise ConfigError(f"~arrival must be >= 0 (0: off), got {self.arrival!r}")
 
     def limits(self) -> UnicycleLimits:
         """The robot's limits (ModelError when one is not positive)."""
@@ -137,7 +144,7 @@ class RewardControllerConfig(NodeConfig):
         return {"horizon": self.horizon, "plan_dt": self.plan_dt, "terminal": self.terminal,
                 "max_iter": self.max_iter, "detour": self.detour,
                 "spread_seeds": self.spread_seeds, "discount": self.discount,
-                "min_horizon": self.min_horizon}
+                "min_horizon": self.min_horizon, "arrival": self.arrival}
 
 
 @dataclass

@@ -28,16 +28,34 @@ def preferred_speed(reward, v_max: float) -> float:
     ahead) - at most v_max; v_max when the reward has no positive pull or no negative penalty (no
     speed of its own: the robot's limit). A wrapper with a `.reward` (CollisionBarrier) is looked
     through; LfdError for a reward that is not linear."""
-    inner = getattr(reward, "reward", reward)
+    linear, squared = _speed_weights(reward)
+    if not (linear > 0 and squared < 0):
+        return float(v_max)
+    return float(min(linear / (-2.0 * squared), v_max))
+
+
+def _speed_weights(reward):
+    """(linear, squared): a linear reward's summed weights of the per-step speed terms."""
+    inner = reward
+    while getattr(inner, "features", None) is None and getattr(inner, "reward", None) is not None:
+        inner = inner.reward          # look through wrappers (CollisionBarrier, ArrivalReward)
     features, weights = getattr(inner, "features", None), getattr(inner, "weights", None)
     if features is None or weights is None:
         raise LfdError(f"a preferred speed needs a linear reward, got {type(inner).__name__}")
     named = dict(zip(features.names, np.asarray(weights, float)))
-    linear = named.get("goal_progress", 0.0) + named.get("forward_command", 0.0)
-    squared = named.get("speed_squared", 0.0) + named.get("speed_effort", 0.0)
-    if not (linear > 0 and squared < 0):
-        return float(v_max)
-    return float(min(linear / (-2.0 * squared), v_max))
+    return (named.get("goal_progress", 0.0) + named.get("forward_command", 0.0),
+            named.get("speed_squared", 0.0) + named.get("speed_effort", 0.0))
+
+
+def arrival_time_cost(reward, v_max: float) -> float:
+    """The cost of one more step before arrival that makes a linear reward arrive at its own
+    preferred speed v*: |w_squared| v*^2 (0 without a squared-speed penalty). Covering a distance
+    D in k steps of dt costs k |w_squared| (D / k dt)^2 in speed terms (the progress sum is D
+    whatever k); with c per step before arrival, k c + |w_squared| D^2 / (k dt^2) is least at
+    D / (k dt) = sqrt(c / |w_squared|), which is v* for c = |w_squared| v*^2. LfdError for a
+    reward that is not linear."""
+    _, squared = _speed_weights(reward)
+    return float(-squared * preferred_speed(reward, v_max) ** 2) if squared < 0 else 0.0
 
 
 def trajectory_reward(reward, model, task: Task, start, t0: float, actions, *, gradient: bool = True,
@@ -207,6 +225,83 @@ class CollisionBarrier:
         return rd
 
 
+class ArrivalReward:
+    """A reward with an absorbing goal region: a step in the region of `radius` m around the goal
+    is worth the goal's value - the reward of resting at the goal centre (zero speed and commands,
+    the step's heading and time) - instead of its own reward, so after arrival no effort, time or
+    distance cost accrues (and no progress is collected). Arriving sooner is then never worse than
+    crawling along the region's edge: with the goal inside the look-ahead, speed and turn costs of
+    a learned reward otherwise stretch the last metres until the robot creeps, or stops, just
+    outside the region.
+
+    The region's edge is smooth (C1) so the optimiser feels it: the weight of the goal's value,
+    a = smoothstep((radius + band / 2 - d) / band) at goal distance d, rises from 0 at
+    radius + band / 2 to 1 at radius - band / 2; a step's reward is (1 - a) r + a r_goal. Planning
+    only (first order); the goal's value is evaluated only for steps with a > 0.
+
+    time_cost: subtracted from every step's reward before arrival (not from the goal's value):
+    with a progress reward the distance made good is the same however slowly it is made, so
+    without a price on time an absorbing goal removes only the costs after arrival; the
+    controller uses arrival_time_cost (the price at which the reward's own trade-off arrives at
+    its preferred speed)."""
+
+    kind = "arrival"
+
+    def __init__(self, reward, radius: float, *, band: float = 0.1, time_cost: float = 0.0):
+        if not radius > 0 or not 0 < band < 2 * radius:
+            raise LfdError(f"arrival radius must be positive and the band in (0, 2 x radius), got "
+                           f"{radius!r}, {band!r}")
+        if time_cost < 0:
+            raise LfdError(f"the arrival time cost must be >= 0, got {time_cost!r}")
+        self.reward, self.radius, self.band = reward, float(radius), float(band)
+        self.time_cost = float(time_cost)
+
+    def weight(self, distance):
+        """(a, da/dd) for goal distances `distance` (the smoothstep of the region's edge)."""
+        z = np.clip((self.radius + 0.5 * self.band - np.asarray(distance, float)) / self.band, 0.0, 1.0)
+        return z * z * (3.0 - 2.0 * z), -6.0 * z * (1.0 - z) / self.band
+
+    def derivatives(self, states, actions, times, task: Task, *, order: int = 2):
+        if order > 1:
+            raise LfdError("ArrivalReward gives first derivatives only (for planning)")
+        states = np.atleast_2d(np.asarray(states, float))
+        actions = np.atleast_2d(np.asarray(actions, float))
+        count = len(states)
+        times = np.broadcast_to(np.asarray(times, float), (count,))
+        offset = states[:, :2] - np.asarray(task.goal, float)
+        distance = np.linalg.norm(offset, axis=1)
+        a, slope = self.weight(distance)
+        near = np.flatnonzero(a > 0.0)
+        if len(near):       # the goal's value at rest, evaluated in the same call (one call's cost)
+            rest = np.zeros((len(near), 5))
+            rest[:, :2] = np.asarray(task.goal, float)
+            rest[:, 2] = states[near, 2]
+            rd = self.reward.derivatives(np.vstack([states, rest]),
+                                         np.vstack([actions, np.zeros((len(near), 2))]),
+                                         np.concatenate([times, times[near]]), task, order=order)
+            goal_value, rd.value = rd.value[count:], rd.value[:count]
+            if order >= 1:
+                goal_yaw, rd.rx, rd.ru = rd.rx[count:, 2], rd.rx[:count], rd.ru[:count]
+        else:
+            rd = self.reward.derivatives(states, actions, times, task, order=order)
+        value = rd.value - self.time_cost if self.time_cost else rd.value.copy()
+        if len(near) == 0:
+            rd.value = value
+            return rd
+        own = value[near]
+        value[near] = (1.0 - a[near]) * own + a[near] * goal_value
+        rd.value = value
+        if order >= 1:
+            rx, ru = rd.rx.copy(), rd.ru.copy()
+            rx[near] *= (1.0 - a[near])[:, None]
+            rx[near, 2] += a[near] * goal_yaw          # the goal's value at the step's heading
+            unit = offset[near] / np.maximum(distance[near], 1e-9)[:, None]
+            rx[near, :2] += ((goal_value - own) * slope[near])[:, None] * unit
+            ru[near] *= (1.0 - a[near])[:, None]
+            rd.rx, rd.ru = rx, ru
+        return rd
+
+
 class RecedingHorizonController:
     """Re-plans `horizon` steps of the reward from the current state at every call (warm-started
     from the previous plan, shifted by the time that passed, plus turning seeds) and returns the
@@ -235,14 +330,18 @@ class RecedingHorizonController:
         clipped to [min_horizon, horizon], so the plan ends about when the robot would arrive
         (with the goal well inside a fixed look-ahead, speed costs spread the last metres over it:
         a crawl; the learned windows end at arrival); 0: always `horizon` steps. `steps_` is the
-        last call's count.
+        last call's count; arrival > 0: plan with ArrivalReward(reward, arrival, time_cost=
+        arrival_time_cost(reward, v_max)) - an absorbing goal region of that radius (the task's
+        goal tolerance): no cost accrues after arrival and each step before it costs the price at
+        which the reward arrives at its preferred speed (needs a linear reward); 0: the reward as
+        given.
     """
 
     def __init__(self, reward, model, *, horizon: int = 20, plan_dt: Optional[float] = 0.2,
                  terminal: float = 10.0, max_iter: int = 15, seed_iter: int = 6, seed_every: int = 5,
                  seed_turns: Sequence[float] = (0.0, 1.2, -1.2), budget: Optional[float] = None,
                  detour: float = 0.0, spread_seeds: bool = False, discount: float = 1.0,
-                 min_horizon: int = 0):
+                 min_horizon: int = 0, arrival: float = 0.0):
         if horizon < 2:
             raise LfdError(f"the planning horizon must be at least 2 steps, got {horizon}")
         if plan_dt is not None and not plan_dt > 0:
@@ -265,6 +364,12 @@ class RecedingHorizonController:
             raise LfdError(f"min_horizon must be 0 (fixed horizon) or in [2, horizon={self.horizon}], "
                            f"got {min_horizon!r}")
         self.speed = preferred_speed(reward, self.model.limits.v_max) if self.min_horizon else None
+        if arrival < 0:
+            raise LfdError(f"the arrival radius must be >= 0 (0: off), got {arrival!r}")
+        self.arrival = float(arrival)
+        if self.arrival > 0:
+            self.reward = ArrivalReward(reward, self.arrival, time_cost=arrival_time_cost(
+                reward, self.model.limits.v_max))
         self.reset()
 
     def reset(self) -> None:
