@@ -5,8 +5,14 @@ detections of its objects and sightings of its labelled places (both layers); rv
 OpenGL) shows them; a screenshot of the X display must have marker colours at every cluster's
 position and plain map grey in the hall away from them.
 World -> pixel comes from the screenshot itself: the map's black outer walls span the map extent.
+Debian's rviz 1.14 on software OpenGL now and then aborts while it sets up its shaders, before it
+draws anything (heap corruption, `free(): invalid next size`, killed by SIGABRT: exit code -6;
+seen once under two busy loops). That crash is rviz's own, not the layers', so the test starts rviz
+again when, and only when, rviz died from a signal (at most RVIZ_STARTS times); a wrong picture or
+an rviz that stays up without drawing still fails at once.
 """
 import os
+import re
 import shutil
 import subprocess
 from pathlib import Path
@@ -19,11 +25,12 @@ from igmm_layers.srv import LocateObjects
 from robot_common.msg import ObjectObservation
 from robot_sim import generate_building
 from robot_sim.detections import building_scene, simulate_detections
-from ros_harness import RosLaunch, wait_until
+from ros_harness import ProcessDied, RosLaunch, wait_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.rviz]
 CONFIG = Path(__file__).resolve().parent.parent / "config" / "igmm_layers.rviz"
 BACKGROUND = np.array([40, 40, 40]) / 255.0  # the config's background colour
+RVIZ_STARTS = 3
 
 
 def _screenshot(display: str, path: Path) -> np.ndarray:
@@ -94,9 +101,6 @@ def test_rviz_draws_the_clusters_over_the_map(roscore, rospy_node, roslaunch, xv
     assert len(located) >= 0.9 * len(building.objects) + len(building.labels)
     monkeypatch.setenv("DISPLAY", xvfb_display)
     monkeypatch.setenv("LIBGL_ALWAYS_SOFTWARE", "1")
-    rviz: RosLaunch = roslaunch.node("rviz", "rviz", name="rviz_test", node_args=f"-d {CONFIG}")
-    rviz.wait_for_subscribers(["/map", "/igmm_layers/markers/default/objects",
-                               "/igmm_layers/markers/default/regions"], timeout=90)
     width_m = building.grid.width * building.grid.resolution
     height_m = building.grid.height * building.grid.resolution
     means = np.array([(c.mean.x, c.mean.y) for c in located])
@@ -112,12 +116,23 @@ def test_rviz_draws_the_clusters_over_the_map(roscore, rospy_node, roslaunch, xv
         last["missing"] = [tuple(m) for m in means if not _saturated(image, to_pixel(*m), 3).any()]
         last["coloured"] = [q for q in quiet if _saturated(image, to_pixel(*q), 2).any()]
         return not last["missing"] and not last["coloured"] and len(quiet) >= 3
-    try:
-        wait_until(drawn, 90, interval=1.0, what="rviz to draw every cluster over the map",
-                   check=rviz.process.check_alive)
-    except TimeoutError as err:
-        raise AssertionError(f"{err}; screenshot {shot}; clusters without marker colour: "
-                             f"{last.get('missing')}; coloured hall points: {last.get('coloured')}") from None
+    for start in range(1, RVIZ_STARTS + 1):
+        rviz: RosLaunch = roslaunch.node("rviz", "rviz", name="rviz_test", node_args=f"-d {CONFIG}")
+        try:
+            rviz.wait_for_subscribers(["/map", "/igmm_layers/markers/default/objects",
+                                       "/igmm_layers/markers/default/regions"], timeout=90)
+            wait_until(drawn, 90, interval=1.0, what="rviz to draw every cluster over the map",
+                       check=rviz.process.check_alive)
+            break
+        except (TimeoutError, ProcessDied) as err:
+            crashed = re.search(r"rviz_test-1\] process has died \[pid \d+, exit code -\d+",
+                                rviz.log_tail(200))
+            if crashed and start < RVIZ_STARTS:
+                roslaunch.stop(rviz)
+                continue
+            raise AssertionError(f"{err}; screenshot {shot}; clusters without marker colour: "
+                                 f"{last.get('missing')}; coloured hall points: "
+                                 f"{last.get('coloured')}") from None
     target = os.environ.get("IGMM_SCREENSHOT_TO")
     if target:  # how the README's screenshot is made
         shutil.copy(shot, target)
