@@ -24,10 +24,10 @@ import yaml
 from geometry_msgs.msg import Point
 
 from igmm_layers.msg import ClusterSet, ObjectCluster
+from igmm_layers.params import LayerServerConfig
 from igmm_layers.ros_convert import apply_cluster_set
 from igmm_layers.ros_layer_server import LayerServer
 from igmm_layers.ros_services import LayerServices
-from igmm_layers.server_config import ServerConfig
 from igmm_layers.srv import (
     AlternateObject,
     CountObjects,
@@ -117,7 +117,7 @@ def timed(call, kwargs_list):
 
 def in_process(msg, plan):
     """The same handlers without ROS transport: a LayerServer that is never set up."""
-    server = LayerServer(ServerConfig.from_params(yaml.safe_load(CONFIG.read_text())))
+    server = LayerServer(LayerServerConfig.from_params(yaml.safe_load(CONFIG.read_text())))
     apply_cluster_set(server.layers, msg)
     services = LayerServices(server)
     handlers = {"lookup_object": services.lookup, "pair_likelihood": services.pair,

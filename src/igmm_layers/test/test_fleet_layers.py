@@ -12,11 +12,11 @@ import requests
 import rospy
 from geometry_msgs.msg import Point
 
-from igmm_layers.errors import InvalidInputError
 from igmm_layers.msg import ClusterSet, ObjectCluster
+from igmm_layers.params import LayerServerConfig
 from igmm_layers.ros_persistence import save_cluster_set
-from igmm_layers.server_config import ServerConfig
 from igmm_layers.srv import LayerInfo, LocateObjects
+from robot_common.errors import ConfigError
 from robot_common.msg import ObjectObservation
 from ros_harness import PouchDBServer, wait_until
 from ros_mongo import open_store
@@ -96,14 +96,14 @@ def learned(text: str):
 
 
 def test_source_central_needs_a_central_url():
-    config = ServerConfig.from_params({"source": "central", "central_url": "http://c:5984/fleet"})
+    config = LayerServerConfig.from_params({"source": "central", "central_url": "http://c:5984/fleet"})
     assert (config.source, config.central.central_url, config.central_clusters) == (
         "central", "http://c:5984/fleet", False)
-    assert ServerConfig.from_params({}).source == "topic"
-    with pytest.raises(InvalidInputError, match="central_url"):
-        ServerConfig.from_params({"source": "central"})
-    with pytest.raises(InvalidInputError) as caught:
-        ServerConfig.from_params({"source": "central", "central_url": "couch://u:hunter2@c/f"})
+    assert LayerServerConfig.from_params({}).source == "topic"
+    with pytest.raises(ConfigError, match="central_url"):
+        LayerServerConfig.from_params({"source": "central"})
+    with pytest.raises(ConfigError) as caught:
+        LayerServerConfig.from_params({"source": "central", "central_url": "couch://u:hunter2@c/f"})
     assert "hunter2" not in str(caught.value)
 
 

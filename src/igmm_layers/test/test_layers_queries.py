@@ -8,10 +8,11 @@ import yaml
 
 from igmm_layers import ClassHierarchy, ClusterTable, LayerParams, LayerSet
 from igmm_layers.errors import InvalidInputError, NotFittedError, UnknownNameError
+from igmm_layers.params import LayerServerConfig
 from igmm_layers.queries import alternate_classes, closest, count_observed, most_likely, pair_likelihood
-from igmm_layers.server_config import ServerConfig
 from igmm_layers.sim.metrics import match_scores, ospa
 from igmm_layers.visual import class_colour, ellipse
+from robot_common.errors import ConfigError
 
 CONFIG = Path(__file__).resolve().parent.parent / "config" / "igmm_layers.yaml"
 
@@ -117,9 +118,9 @@ def test_count_observed_in_a_time_window_near_a_point():
 
 def test_shipped_configuration_loads_and_bad_configurations_are_refused():
     params = yaml.safe_load(CONFIG.read_text())
-    config = ServerConfig.from_params(params)
+    config = LayerServerConfig.from_params(params)
     assert config.layer_defaults.v_min == 100 and config.hierarchy.is_group("furniture")
-    regional = ServerConfig.from_params({**params, "regions": [
+    regional = LayerServerConfig.from_params({**params, "regions": [
         {"region_id": "floor_4", "kind": "objects", "observation_topic": "/floor_4/objects",
          "region_size": 40.0}]})
     assert regional.regions[("floor_4", "objects")].region_size == 40.0
@@ -131,8 +132,8 @@ def test_shipped_configuration_loads_and_bad_configurations_are_refused():
            ({"pair_method": "cosine"}, "pair_method"),
            ({"class_colours": {"chair": [2, 0, 0]}}, "class_colours")]
     for change, match in bad:
-        with pytest.raises(InvalidInputError, match=match):
-            ServerConfig.from_params({**params, **change})
+        with pytest.raises(ConfigError, match=match):
+            LayerServerConfig.from_params({**params, **change})
 
 
 def test_ellipse_axes_and_orientation_from_a_covariance():

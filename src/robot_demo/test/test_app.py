@@ -2,7 +2,7 @@
 import pytest
 
 from robot_demo.app import CHAPTERS, Demo, parse_args, workspace_root
-from robot_sim.configs import DetectionSimConfig, PeopleSimConfig
+from robot_sim.params import ObjectDetectionSimParams, PeopleSimParams
 
 
 def test_the_chapters_run_in_the_documented_order_and_each_has_a_title():
@@ -25,5 +25,6 @@ def test_composed_launch_files_are_in_the_workspace_launch_folder():
 
 
 def test_simulator_parameters_come_from_the_files_the_launch_files_load():
-    assert Demo.sim_config(PeopleSimConfig, "people_sim.yaml") == PeopleSimConfig()
-    assert Demo.sim_config(DetectionSimConfig, "object_detection_sim.yaml") == DetectionSimConfig()
+    assert Demo.sim_config(PeopleSimParams, "people_sim.yaml") == PeopleSimParams()
+    detection_params = Demo.sim_config(ObjectDetectionSimParams, "object_detection_sim.yaml")
+    assert detection_params == ObjectDetectionSimParams()

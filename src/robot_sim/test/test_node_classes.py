@@ -5,15 +5,15 @@ import numpy as np
 import pytest
 
 from robot_common.errors import ConfigError, MapError
-from robot_sim.configs import (
-    DetectionSimConfig,
-    MapPublisherConfig,
-    PeopleSimConfig,
-    SensorSimConfig,
-    UnicycleSimConfig,
+from robot_sim.detections import building_detections, place_sightings
+from robot_sim.params import (
+    MapPublisherParams,
+    ObjectDetectionSimParams,
+    PeopleSimParams,
+    SensorSimParams,
+    UnicycleSimParams,
     load_config_file,
 )
-from robot_sim.detections import building_detections, place_sightings
 from robot_sim.ros_detections import DetectionSim
 from robot_sim.ros_map_publisher import MapPublisher
 from robot_sim.ros_people import PeopleSimNode
@@ -21,9 +21,9 @@ from robot_sim.ros_sensors import SensorSim
 from robot_sim.ros_unicycle import UnicycleSim
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "config"
-FILES = {"map_publisher.yaml": MapPublisherConfig, "sensor_sim.yaml": SensorSimConfig,
-         "unicycle_sim.yaml": UnicycleSimConfig, "people_sim.yaml": PeopleSimConfig,
-         "object_detection_sim.yaml": DetectionSimConfig}
+FILES = {"map_publisher.yaml": MapPublisherParams, "sensor_sim.yaml": SensorSimParams,
+         "unicycle_sim.yaml": UnicycleSimParams, "people_sim.yaml": PeopleSimParams,
+         "object_detection_sim.yaml": ObjectDetectionSimParams}
 
 
 @pytest.mark.parametrize("name", sorted(FILES))
@@ -34,44 +34,44 @@ def test_the_launch_files_parameter_files_hold_the_class_defaults(name):
 
 def test_parameters_are_checked_by_name_type_and_range():
     with pytest.raises(ConfigError, match="~robots must be >= 1"):
-        PeopleSimConfig.from_mapping({"robots": 0})
+        PeopleSimParams.from_mapping({"robots": 0})
     with pytest.raises(ConfigError, match="~rate, ~time_scale and ~radius must be positive"):
-        PeopleSimConfig.from_mapping({"time_scale": 0.0})
+        PeopleSimParams.from_mapping({"time_scale": 0.0})
     with pytest.raises(ConfigError, match="unknown parameter"):
-        SensorSimConfig.from_mapping({"scan_rays": 10})
+        SensorSimParams.from_mapping({"scan_rays": 10})
     with pytest.raises(ConfigError, match="~time_scale must be positive"):
-        UnicycleSimConfig.from_mapping({"time_scale": -1.0})
+        UnicycleSimParams.from_mapping({"time_scale": -1.0})
     with pytest.raises(ConfigError, match="~rate must be positive"):
-        DetectionSimConfig.from_mapping({"rate": 0})
-    assert SensorSimConfig.from_mapping({"odom_rate": 0}).odom_rate == 0.0
+        ObjectDetectionSimParams.from_mapping({"rate": 0})
+    assert SensorSimParams.from_mapping({"odom_rate": 0}).odom_rate == 0.0
 
 
 def test_a_missing_parameter_file_is_a_config_error(tmp_path):
     with pytest.raises(ConfigError, match="cannot read parameter file"):
-        load_config_file(PeopleSimConfig, tmp_path / "none.yaml")
+        load_config_file(PeopleSimParams, tmp_path / "none.yaml")
 
 
 def test_map_publisher_reads_the_generated_building_or_fails_on_a_missing_file(tmp_path):
-    publisher = MapPublisher(MapPublisherConfig(seed=2))
+    publisher = MapPublisher(MapPublisherParams(seed=2))
     assert publisher.building is not None and publisher.grid is publisher.building.grid
     with pytest.raises(MapError, match="cannot read map file"):
-        MapPublisher(MapPublisherConfig(map_yaml=str(tmp_path / "missing.yaml")))
+        MapPublisher(MapPublisherParams(map_yaml=str(tmp_path / "missing.yaml")))
 
 
 def test_sensor_sim_patrols_the_generated_hall_with_the_configured_sensors():
-    sim = SensorSim(SensorSimConfig(scan_beams=90, image_width=32, image_height=24))
+    sim = SensorSim(SensorSimParams(scan_beams=90, image_width=32, image_height=24))
     state = sim.path.state(3.0)
     assert len(sim.sensors.scan(state)) == 90
     assert sim.sensors.image(state).shape == (24, 32, 3)
 
 
 def test_unicycle_sim_starts_where_it_is_told():
-    sim = UnicycleSim(UnicycleSimConfig(start=[0.5, 0.25, 0.0]))
+    sim = UnicycleSim(UnicycleSimParams(start=[0.5, 0.25, 0.0]))
     assert sim.episode.state[:3].tolist() == [0.5, 0.25, 0.0]
 
 
 def test_detection_sim_publishes_what_building_detections_says():
-    config = DetectionSimConfig(mean_detections=3.0, place_detections=2)
+    config = ObjectDetectionSimParams(mean_detections=3.0, place_detections=2)
     sim = DetectionSim(config)
     building, detections = building_detections(config)
     sightings = place_sightings(building, config)
@@ -82,6 +82,6 @@ def test_detection_sim_publishes_what_building_detections_says():
 
 
 def test_people_sim_builds_the_generated_building_or_a_given_map():
-    node = PeopleSimNode(PeopleSimConfig(cell_size=1.0))
-    from_map = PeopleSimNode(PeopleSimConfig(cell_size=1.0), grid=node.sim.cells.grid)
+    node = PeopleSimNode(PeopleSimParams(cell_size=1.0))
+    from_map = PeopleSimNode(PeopleSimParams(cell_size=1.0), grid=node.sim.cells.grid)
     assert from_map.sim.cells.n_cells == node.sim.cells.n_cells > 0

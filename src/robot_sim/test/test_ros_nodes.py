@@ -18,12 +18,12 @@ def test_people_sim_publishes_people_counts(roslaunch, rospy_node):
 
 def test_object_detection_sim_publishes_its_detections_then_exits(roslaunch, rospy_node):
     from robot_common.msg import ObjectObservation
-    from robot_sim.configs import DetectionSimConfig
     from robot_sim.detections import building_detections, place_sightings
+    from robot_sim.params import ObjectDetectionSimParams
 
     params = {"mean_detections": 2.0, "place_detections": 1, "rate": 2000.0}
-    building, detections = building_detections(DetectionSimConfig(**params))
-    expected = len(detections) + len(place_sightings(building, DetectionSimConfig(**params)))
+    building, detections = building_detections(ObjectDetectionSimParams(**params))
+    expected = len(detections) + len(place_sightings(building, ObjectDetectionSimParams(**params)))
     received = []
     subscribers = [rospy_node.Subscriber(topic, ObjectObservation, received.append, queue_size=5000)
                    for topic in ("/igmm_layers/observations", "/igmm_layers/place_observations")]

@@ -1,7 +1,7 @@
 """Object layers: incremental Gaussian mixtures of object detections per class and map region.
 
 Pure-Python core (no rospy): `IncrementalGMM` (igmm.py), `ClassHierarchy`, `LayerSet`/`Layer`
-(layers.py), queries (queries.py), the node's parameters (server_config.py). The ROS node is in
+(layers.py), queries (queries.py), the node's parameters (params.py). The ROS node is in
 ros_*.py and nodes/igmm_layers. Test and benchmark oracles (scores, the literal reference IGMM)
 are in the `igmm_layers.sim` subpackage. Region search (phrases to labelled places) is its own
 package, region_search, a client of the LocateObjects service.

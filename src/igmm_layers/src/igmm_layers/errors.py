@@ -1,13 +1,17 @@
-"""Errors of the object layers (the mixture core, the layers and their queries; no rospy here)."""
+"""Errors of the object layers (the mixture core, the layers and their queries; no rospy here).
+
+A bad node parameter is robot_common's ConfigError (the workspace has one)."""
+from robot_common.errors import NotFittedError as CommonNotFittedError
+from robot_common.errors import WorkspaceError
 
 __all__ = ["IGMMError", "NotFittedError", "InvalidInputError", "UnknownNameError", "PersistenceError"]
 
 
-class IGMMError(Exception):
+class IGMMError(WorkspaceError):
     """Base class of the object-layer errors."""
 
 
-class NotFittedError(IGMMError, ValueError):
+class NotFittedError(IGMMError, CommonNotFittedError):
     """A model is asked for something before it has seen any data."""
 
 

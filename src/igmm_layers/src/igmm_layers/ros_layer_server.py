@@ -14,10 +14,10 @@ from visualization_msgs.msg import MarkerArray
 
 from igmm_layers.errors import IGMMError, InvalidInputError
 from igmm_layers.msg import ClusterSet
+from igmm_layers.params import LayerServerConfig
 from igmm_layers.ros_central import CentralSource
 from igmm_layers.ros_convert import apply_cluster_set, layer_markers, rotation_matrix, size_covariance
 from igmm_layers.ros_services import LayerServices
-from igmm_layers.server_config import ServerConfig
 from robot_common.msg import ObjectObservation
 
 __all__ = ["LayerServer", "marker_topic"]
@@ -34,7 +34,7 @@ def marker_topic(region_id: str, kind: str) -> str:
 class LayerServer:
     """Learns object layers from detections and answers queries about them (node `igmm_layers`).
 
-    Parameters (server_config.ServerParams; defaults in config/igmm_layers.yaml, generated from
+    Parameters (params.LayerServerParams; defaults in config/igmm_layers.yaml, generated from
     it; see the README for details):
       ~map_frame (str, "map"): the frame of all clusters; observations are transformed into it.
       ~default_region (str, "default"): region of observations that name none.
@@ -65,7 +65,7 @@ class LayerServer:
       says, for source central, which robots and how many observations of each were learnt).
     """
 
-    def __init__(self, config: ServerConfig):
+    def __init__(self, config: LayerServerConfig):
         self.config = config
         self.layers = config.layer_set()
         self.lock = threading.RLock()  # guards self.layers and the counters

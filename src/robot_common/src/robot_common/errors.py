@@ -1,11 +1,22 @@
-"""Errors of the shared vocabulary; every workspace package derives its own from these where they
-mean the same thing (a bad map, a bad parameter, a model used before it was fitted)."""
+"""Errors of the workspace: one root, and the shared kinds every package reuses.
 
-__all__ = ["CommonError", "MapError", "ModelError", "TaskError", "ConfigError", "NotFittedError"]
+Every package's own base error derives from `WorkspaceError`, so a caller can catch all errors
+the workspace raises on purpose with one class. Errors that mean the same thing everywhere live
+here once: a bad node parameter is always a `ConfigError`, an estimator used before it was fitted
+raises a subclass of `NotFittedError` (which also derives from its package's base, so callers may
+catch either).
+"""
+
+__all__ = ["WorkspaceError", "CommonError", "MapError", "ModelError", "TaskError", "ConfigError",
+           "NotFittedError"]
 
 
-class CommonError(ValueError):
-    """Base error of robot_common."""
+class WorkspaceError(Exception):
+    """Root of every error the workspace's packages raise on purpose."""
+
+
+class CommonError(WorkspaceError, ValueError):
+    """Base error of robot_common (bad input to the shared vocabulary)."""
 
 
 class MapError(CommonError):
@@ -21,7 +32,10 @@ class TaskError(CommonError):
 
 
 class ConfigError(CommonError):
-    """A node parameter is unknown or has a bad value (the node exits with one readable line)."""
+    """A node parameter is unknown or has a bad value (the node exits with one readable line).
+
+    The one configuration error of the workspace: packages raise it (or a subclass) rather than
+    defining their own."""
 
 
 class NotFittedError(CommonError):

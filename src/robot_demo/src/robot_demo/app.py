@@ -28,7 +28,7 @@ from robot_demo.chapters import (
     region_search,
     robot,
 )
-from robot_sim.configs import load_config_file
+from robot_sim.params import load_config_file
 from ros_harness import LaunchSet, PouchDBServer, RosCore, RosLaunch, free_port
 
 __all__ = ["CHAPTERS", "Demo", "workspace_root", "parse_args", "main"]

@@ -13,7 +13,7 @@ so learners can be scored against the truth they did not produce.
     building_scene(generate_building(0))   # the generated building's objects as a scene
 
 `building_detections(config)` and `place_sightings(building, config)` are what the
-object_detection_sim node publishes for its `DetectionSimConfig`, so that anyone holding the same
+object_detection_sim node publishes for its `ObjectDetectionSimParams`, so that anyone holding the same
 parameters (the demo, tests) knows the truth behind its messages.
 """
 from dataclasses import dataclass
@@ -22,8 +22,8 @@ from typing import List, Optional, Sequence, Tuple
 import numpy as np
 
 from robot_sim.building import Building, generate_building
-from robot_sim.configs import DetectionSimConfig
 from robot_sim.errors import SimError
+from robot_sim.params import ObjectDetectionSimParams
 
 __all__ = ["SceneObject", "Detections", "random_scene", "building_scene", "simulate_detections",
            "scene_bounds", "building_detections", "place_sightings"]
@@ -177,7 +177,7 @@ def _size(obj: SceneObject, dim: int) -> np.ndarray:
     return size
 
 
-def building_detections(config: DetectionSimConfig) -> Tuple[Building, Detections]:
+def building_detections(config: ObjectDetectionSimParams) -> Tuple[Building, Detections]:
     """The generated building of `config.seed` and object_detection_sim's detections of it."""
     building = generate_building(config.seed)
     detections = simulate_detections(building_scene(building), mean_detections=config.mean_detections,
@@ -187,7 +187,7 @@ def building_detections(config: DetectionSimConfig) -> Tuple[Building, Detection
     return building, detections
 
 
-def place_sightings(building: Building, config: DetectionSimConfig) -> List[Tuple[str, np.ndarray]]:
+def place_sightings(building: Building, config: ObjectDetectionSimParams) -> List[Tuple[str, np.ndarray]]:
     """(label, noisy x/y) sightings of every labelled place, `config.place_detections` each."""
     rng = np.random.default_rng(config.random_seed + 1)
     return [(name, np.array(xy) + rng.normal(0, config.noise_std, 2))

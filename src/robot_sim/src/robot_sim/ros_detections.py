@@ -7,8 +7,8 @@ import rospy
 from geometry_msgs.msg import Point, Vector3
 
 from robot_common.msg import ObjectObservation
-from robot_sim.configs import DetectionSimConfig
 from robot_sim.detections import building_detections, place_sightings
+from robot_sim.params import ObjectDetectionSimParams
 
 __all__ = ["DetectionSim", "observation"]
 
@@ -30,7 +30,7 @@ class DetectionSim:
     Gaussian noise, uniform clutter, random order) and place_sightings(config) of every labelled
     place (room labels, hall landmarks).
 
-    Parameters (robot_sim.configs.DetectionSimConfig, defaults in
+    Parameters (robot_sim.params.ObjectDetectionSimParams, defaults in
     config/object_detection_sim.yaml): ~seed (0): building seed; ~random_seed (1): detection
     noise seed; ~mean_detections (20.0), ~noise_std (0.1 m), ~clutter_fraction (0.1),
     ~extent_spread (true): detections anywhere on an object's extent; ~with_size (true): report
@@ -43,7 +43,7 @@ class DetectionSim:
     publishers; `publish_all()` waits for subscribers on both topics, then publishes at ~rate.
     """
 
-    def __init__(self, config: DetectionSimConfig):
+    def __init__(self, config: ObjectDetectionSimParams):
         self.config = config
         building, self.detections = building_detections(config)
         dets = self.detections

@@ -6,7 +6,7 @@ from nav_msgs.msg import MapMetaData, OccupancyGrid
 
 from robot_common.ros_maps import grid_to_msg
 from robot_sim.building import building_or_map
-from robot_sim.configs import MapPublisherConfig
+from robot_sim.params import MapPublisherParams
 
 __all__ = ["MapPublisher"]
 
@@ -14,7 +14,7 @@ __all__ = ["MapPublisher"]
 class MapPublisher:
     """Publishes a map file or a generated building floor, latched, once.
 
-    Parameters (robot_sim.configs.MapPublisherConfig): ~map_yaml (""; empty: the generated
+    Parameters (robot_sim.params.MapPublisherParams): ~map_yaml (""; empty: the generated
     building of ~seed), ~seed (0), ~frame_id ("map"), ~labels_path ("": if set, the generated
     building's labels are written there in the map_labelling JSON format).
     Topics (out, latched): map (nav_msgs/OccupancyGrid), map_metadata (nav_msgs/MapMetaData).
@@ -23,7 +23,7 @@ class MapPublisher:
     writes the labels file and publishes.
     """
 
-    def __init__(self, config: MapPublisherConfig):
+    def __init__(self, config: MapPublisherParams):
         self.config = config
         self.grid, self.building = building_or_map(config.map_yaml, config.seed)
 

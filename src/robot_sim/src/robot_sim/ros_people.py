@@ -11,7 +11,7 @@ from robot_common.maps import GridMap, load_map
 from robot_common.msg import PeopleCount
 from robot_common.ros_maps import msg_to_grid
 from robot_sim.building import generate_building
-from robot_sim.configs import PeopleSimConfig
+from robot_sim.params import PeopleSimParams
 from robot_sim.people import PeopleSimulator, View
 
 __all__ = ["MONDAY_EPOCH", "sim_stamp", "map_from_topic", "PeopleSimNode"]
@@ -32,7 +32,7 @@ def map_from_topic(timeout: float = 120.0) -> GridMap:
 class PeopleSimNode:
     """Simulated robots counting people in the halls, at random places, in simulated time.
 
-    Parameters (private; robot_sim.configs.PeopleSimConfig, defaults in config/people_sim.yaml):
+    Parameters (private; robot_sim.params.PeopleSimParams, defaults in config/people_sim.yaml):
     map_yaml ("": the generated building of `seed`, as robot_sim's map_publisher makes it; else
     halls derived from the map),
     use_map_topic (false; true: halls derived from the first `map` message, nav_msgs/OccupancyGrid),
@@ -48,7 +48,7 @@ class PeopleSimNode:
     `setup()` creates the publisher and the timer.
     """
 
-    def __init__(self, config: PeopleSimConfig, *, grid: Optional[GridMap] = None):
+    def __init__(self, config: PeopleSimParams, *, grid: Optional[GridMap] = None):
         self.config = config
         options = dict(seed=config.sim_seed)
         if config.map_yaml or grid is not None:

@@ -11,8 +11,8 @@ from sensor_msgs.msg import Image, JointState, LaserScan
 
 from robot_common.maps import yaw_to_quaternion
 from robot_sim.building import building_or_map
-from robot_sim.configs import SensorSimConfig
 from robot_sim.mobile_base import PatrolPath, SensorModel, hall_patrol
+from robot_sim.params import SensorSimParams
 
 __all__ = ["SensorSim", "run_at"]
 
@@ -20,7 +20,7 @@ __all__ = ["SensorSim", "run_at"]
 class SensorSim:
     """Publishes each sensor from its own thread at its own rate.
 
-    Parameters (robot_sim.configs.SensorSimConfig, defaults in config/sensor_sim.yaml):
+    Parameters (robot_sim.params.SensorSimParams, defaults in config/sensor_sim.yaml):
       ~map_yaml (""), ~seed (0): the map (empty map_yaml: the generated building, patrolling its
       main hall; a map file: patrolling ~waypoints, default [[0, 0], [1, 0]]).
       ~speed (0.5 m/s): patrol speed.
@@ -38,7 +38,7 @@ class SensorSim:
     the publishing threads.
     """
 
-    def __init__(self, config: SensorSimConfig):
+    def __init__(self, config: SensorSimParams):
         self.config = config
         grid, building = building_or_map(config.map_yaml, config.seed)
         self.path = hall_patrol(building, config.speed) if building is not None else \

@@ -12,8 +12,8 @@ from std_srvs.srv import Trigger, TriggerResponse
 from visualization_msgs.msg import Marker, MarkerArray
 
 from robot_common.maps import quaternion_to_yaw, yaw_to_quaternion
-from robot_sim.configs import UnicycleSimConfig
 from robot_sim.errors import SimError
+from robot_sim.params import UnicycleSimParams
 from robot_sim.scenarios import SimEpisode, load_scenario
 
 __all__ = ["UnicycleSim"]
@@ -28,7 +28,7 @@ def _pose(target, x, y, yaw):
 class UnicycleSim:
     """A turtlebot-like unicycle driving to a goal past one static or moving obstacle.
 
-    Parameters (robot_sim.configs.UnicycleSimConfig, defaults in config/unicycle_sim.yaml):
+    Parameters (robot_sim.params.UnicycleSimParams, defaults in config/unicycle_sim.yaml):
       ~scenario ("static_obstacle"): a scenario name (robot_sim config/scenarios) or YAML path.
       ~seed (0): random starts. ~start ([]): [x, y, yaw] of the first episode; []: random.
       ~time_scale (1.0): simulated seconds per wall-clock second.
@@ -49,7 +49,7 @@ class UnicycleSim:
     time_scale / dt steps per second in a thread of its own.
     """
 
-    def __init__(self, config: UnicycleSimConfig):
+    def __init__(self, config: UnicycleSimParams):
         self.config = config
         self.episode = SimEpisode(load_scenario(config.scenario), seed=config.seed,
                                   command_timeout=config.command_timeout)

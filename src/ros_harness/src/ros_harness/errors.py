@@ -1,7 +1,8 @@
 """Errors of the ros_harness layer."""
+from robot_common.errors import WorkspaceError
 
 
-class HarnessError(RuntimeError):
+class HarnessError(WorkspaceError, RuntimeError):
     """A process could not be started, found or queried."""
 
 

@@ -3,7 +3,7 @@
 pouchdb-server has no accounts, no document size limit and no cluster, so it never gives the
 answers a real Apache CouchDB 3 gives a robot. This proxy is a real process on its own port that
 forwards every request to the real server, and on demand answers instead exactly as Apache CouchDB
-3.5 does (status and JSON bodies measured on a real server, /work/shared/DATABASES.md):
+3.5 does (status and JSON bodies measured on a real Apache CouchDB 3.5.0):
 
 - `auth`: "wrong_password" | "no_credentials" | "not_admin": every request answers 401 with
   CouchDB's reason ("Name or password is incorrect." / "You are not authorized to access this

@@ -48,7 +48,7 @@ def run(demo) -> None:
     from nav_msgs.msg import OccupancyGrid
 
     from robot_sim import generate_building
-    from robot_sim.configs import PeopleSimConfig
+    from robot_sim.params import PeopleSimParams
     from robot_sim.people import PeopleSimulator
     from robot_sim.ros_people import sim_stamp
     from traffic_gp.sim.evaluation import showcase_cells
@@ -63,7 +63,7 @@ def run(demo) -> None:
     count = rospy.ServiceProxy(f"{NODE}/predict_count", PredictCount)
     region = rospy.ServiceProxy(f"{NODE}/predict_region", PredictRegion)
     # the truth of the simulated robots: the people simulator as people_sim.launch configures it
-    config = demo.sim_config(PeopleSimConfig, "people_sim.yaml")
+    config = demo.sim_config(PeopleSimParams, "people_sim.yaml")
     sim = PeopleSimulator.from_building(generate_building(SEED), config.cell_size, seed=config.sim_seed)
     cells = showcase_cells(sim)
     print("  expected people per 0.5 m cell, model (90% interval of the count) vs truth:")

@@ -20,8 +20,8 @@ from igmm_layers.srv import (
     SaveClusters,
 )
 from robot_common.maps import OCCUPIED
-from robot_sim.configs import DetectionSimConfig
 from robot_sim.detections import building_detections
+from robot_sim.params import ObjectDetectionSimParams
 from ros_harness import master_graph, wait_until
 
 TITLE = "Object layers: where things are, learnt from noisy detections (igmm_layers)"
@@ -35,7 +35,7 @@ def service(name, srv):
 def run(demo) -> None:
     # the same detections object_detection_sim publishes (its launch file's parameters, the seeds
     # given below): to know when all arrived, and the truth to score the layers against
-    config = replace(demo.sim_config(DetectionSimConfig, "object_detection_sim.yaml"), seed=SEED,
+    config = replace(demo.sim_config(ObjectDetectionSimParams, "object_detection_sim.yaml"), seed=SEED,
                      random_seed=RANDOM_SEED)
     building, dets = building_detections(config)
     sightings = config.place_detections * len(building.labels)

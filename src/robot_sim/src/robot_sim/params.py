@@ -15,8 +15,8 @@ import yaml
 from robot_common.errors import ConfigError
 from robot_common.params import NodeConfig, param
 
-__all__ = ["MapPublisherConfig", "SensorSimConfig", "UnicycleSimConfig", "PeopleSimConfig",
-           "DetectionSimConfig", "load_config_file"]
+__all__ = ["MapPublisherParams", "SensorSimParams", "UnicycleSimParams", "PeopleSimParams",
+           "ObjectDetectionSimParams", "load_config_file"]
 
 ConfigT = TypeVar("ConfigT", bound=NodeConfig)
 
@@ -24,7 +24,7 @@ _MAP_YAML_DOC = "map_server .yaml file; empty: the generated building floor of `
 
 
 @dataclass
-class MapPublisherConfig(NodeConfig):
+class MapPublisherParams(NodeConfig):
     """map_publisher: the map it publishes."""
 
     map_yaml: str = param("", _MAP_YAML_DOC)
@@ -35,7 +35,7 @@ class MapPublisherConfig(NodeConfig):
 
 
 @dataclass
-class SensorSimConfig(NodeConfig):
+class SensorSimParams(NodeConfig):
     """sensor_sim: the patrolling mobile base and its sensors (a rate of 0 disables a topic)."""
 
     map_yaml: str = param("", _MAP_YAML_DOC)
@@ -58,7 +58,7 @@ class SensorSimConfig(NodeConfig):
 
 
 @dataclass
-class UnicycleSimConfig(NodeConfig):
+class UnicycleSimParams(NodeConfig):
     """unicycle_sim: the scenario, its episodes and the simulated clock."""
 
     scenario: str = param("static_obstacle", "a scenario name (robot_sim config/scenarios) or YAML path")
@@ -75,7 +75,7 @@ class UnicycleSimConfig(NodeConfig):
 
 
 @dataclass
-class PeopleSimConfig(NodeConfig):
+class PeopleSimParams(NodeConfig):
     """people_sim: simulated robots counting people in the halls, in simulated time."""
 
     map_yaml: str = param("", "map_server .yaml file; empty: the generated building of `seed` "
@@ -101,7 +101,7 @@ class PeopleSimConfig(NodeConfig):
 
 
 @dataclass
-class DetectionSimConfig(NodeConfig):
+class ObjectDetectionSimParams(NodeConfig):
     """object_detection_sim: the noisy detections of a generated building's objects and places."""
 
     seed: int = param(0, "seed of the generated building")

@@ -1,16 +1,16 @@
-"""The layer server's parameters (`ServerParams`, a robot_common.params class; no rospy here)
-and their conversion into the layers' objects (`ServerConfig`: LayerParams per region,
+"""The layer server's parameters (`LayerServerParams`, a robot_common.params class; no rospy
+here) and their conversion into the layers' objects (`LayerServerConfig`: LayerParams per region,
 ClassHierarchy, colours).
 
-config/igmm_layers.yaml is generated from ServerParams, where each default is written once (the
-per-layer defaults are LayerParams'); `python -m robot_common.config_files --write` regenerates
-it. Bad values raise InvalidInputError (the package's error) naming the parameter.
+config/igmm_layers.yaml is generated from LayerServerParams, where each default is written once
+(the per-layer defaults are LayerParams'); `python -m robot_common.config_files --write`
+regenerates it. Bad values raise robot_common's ConfigError naming the parameter.
 """
 import math
 from dataclasses import asdict, dataclass, field
 from typing import Dict, List, Mapping, Tuple
 
-from igmm_layers.errors import InvalidInputError
+from igmm_layers.errors import InvalidInputError, UnknownNameError
 from igmm_layers.hierarchy import ClassHierarchy
 from igmm_layers.layers import LayerParams, LayerSet, check_kind
 from igmm_layers.queries import DEFAULT_MAX_DISTANCE, DEFAULT_PAIR_METHOD, PAIR_METHODS
@@ -18,7 +18,7 @@ from robot_common.errors import ConfigError
 from robot_common.params import param
 from ros_mongo.changes import CentralSourceParams
 
-__all__ = ["ServerParams", "ServerConfig"]
+__all__ = ["LayerServerParams", "LayerServerConfig"]
 
 
 _LAYER_DEFAULTS = {name: value for name, value in asdict(LayerParams()).items()
@@ -38,7 +38,7 @@ _CLASS_COLOURS = {
 
 
 @dataclass
-class ServerParams(CentralSourceParams):
+class LayerServerParams(CentralSourceParams):
     """The layer server's private parameters as given (node `igmm_layers`)."""
 
     map_frame: str = param("map", "frame of all clusters; observations in other frames are "
@@ -75,8 +75,8 @@ class ServerParams(CentralSourceParams):
 
 
 @dataclass
-class ServerConfig:
-    """The layer server's configuration, converted from its ServerParams (which hold the defaults)."""
+class LayerServerConfig:
+    """The layer server's configuration, converted from its LayerServerParams (which hold the defaults)."""
 
     map_frame: str
     default_region: str
@@ -102,17 +102,20 @@ class ServerConfig:
         return self.central.source
 
     @classmethod
-    def from_params(cls, params: Mapping[str, object]) -> "ServerConfig":
+    def from_params(cls, params: Mapping[str, object]) -> "LayerServerConfig":
         """Check and convert the node's private parameters (unknown keys are errors)."""
-        try:
-            raw = ServerParams.from_mapping(params)
-        except ConfigError as err:
-            raise InvalidInputError(str(err)) from err
-        return cls.from_node_params(raw)
+        return cls.from_node_params(LayerServerParams.from_mapping(params))
 
     @classmethod
-    def from_node_params(cls, raw: ServerParams) -> "ServerConfig":
-        """Convert checked parameters into the layers' objects (InvalidInputError if they are bad)."""
+    def from_node_params(cls, raw: LayerServerParams) -> "LayerServerConfig":
+        """Convert checked parameters into the layers' objects (ConfigError if they are bad)."""
+        try:
+            return cls._converted(raw)
+        except (InvalidInputError, UnknownNameError) as err:  # found by LayerParams, check_kind
+            raise ConfigError(str(err)) from err
+
+    @classmethod
+    def _converted(cls, raw: LayerServerParams) -> "LayerServerConfig":
         layer_defaults = LayerParams.from_dict(raw.layer_defaults)
         config = cls(map_frame=raw.map_frame, default_region=raw.default_region,
                      observation_topic=raw.observation_topic,
@@ -133,15 +136,15 @@ class ServerConfig:
 
     def check(self) -> None:
         if not self.map_frame or not self.default_region:
-            raise InvalidInputError("map_frame and default_region must not be empty")
+            raise ConfigError("map_frame and default_region must not be empty")
         if self.pair_method not in PAIR_METHODS:
-            raise InvalidInputError(f"pair_method must be one of {PAIR_METHODS}, got {self.pair_method!r}")
+            raise ConfigError(f"pair_method must be one of {PAIR_METHODS}, got {self.pair_method!r}")
         for key in ("marker_rate", "pair_max_distance", "tf_timeout"):
             if not math.isfinite(getattr(self, key)):
-                raise InvalidInputError(f"{key} must be finite, got {getattr(self, key)!r}")
+                raise ConfigError(f"{key} must be finite, got {getattr(self, key)!r}")
         if not (self.pair_max_distance > 0 and self.marker_rate >= 0 and self.tf_timeout >= 0
                 and self.queue_size >= 1):
-            raise InvalidInputError("need pair_max_distance > 0, marker_rate >= 0, tf_timeout >= 0 "
+            raise ConfigError("need pair_max_distance > 0, marker_rate >= 0, tf_timeout >= 0 "
                                     "and queue_size >= 1")
 
     def layer_set(self) -> LayerSet:
@@ -151,22 +154,22 @@ class ServerConfig:
 
 def _mapping(value: object, key: str) -> Mapping:
     if not isinstance(value, Mapping):
-        raise InvalidInputError(f"{key} must be a mapping, got {value!r}")
+        raise ConfigError(f"{key} must be a mapping, got {value!r}")
     return value
 
 
 def _regions(entries: object, defaults: LayerParams) -> Dict[Tuple[str, str], LayerParams]:
     if not isinstance(entries, (list, tuple)):
-        raise InvalidInputError(f"regions must be a list of {{region_id, kind, ...}}, got {entries!r}")
+        raise ConfigError(f"regions must be a list of {{region_id, kind, ...}}, got {entries!r}")
     regions: Dict[Tuple[str, str], LayerParams] = {}
     for entry in entries:
         entry = dict(_mapping(entry, "regions entry"))
         region_id = str(entry.pop("region_id", "") or "")
         if not region_id:
-            raise InvalidInputError(f"regions entry without region_id: {entry!r}")
+            raise ConfigError(f"regions entry without region_id: {entry!r}")
         kind = check_kind(str(entry.pop("kind", "objects")))
         if (region_id, kind) in regions:
-            raise InvalidInputError(f"region {region_id!r} layer {kind!r} configured twice")
+            raise ConfigError(f"region {region_id!r} layer {kind!r} configured twice")
         regions[(region_id, kind)] = LayerParams.from_dict(entry, defaults)
     return regions
 
@@ -176,6 +179,6 @@ def _colours(value: object) -> Dict[str, Tuple[float, float, float]]:
     for name, rgb in _mapping(value, "class_colours").items():
         values: List[float] = list(rgb) if isinstance(rgb, (list, tuple)) else []
         if len(values) != 3 or not all(isinstance(v, (int, float)) and 0 <= v <= 1 for v in values):
-            raise InvalidInputError(f"class_colours[{name!r}] must be [r, g, b] in [0, 1], got {rgb!r}")
+            raise ConfigError(f"class_colours[{name!r}] must be [r, g, b] in [0, 1], got {rgb!r}")
         colours[str(name)] = (float(values[0]), float(values[1]), float(values[2]))
     return colours
