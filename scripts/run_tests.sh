@@ -1,7 +1,16 @@
 #!/usr/bin/env bash
 # The whole test suite, run by `make test` (inside env.sh) and so by .ci/run.
 # Includes the Python 3.8 compatibility and lint checks (tests/test_code_checks.py).
+# Test files run in parallel (pytest-xdist, one file per worker at a time: a file's fixtures are
+# built once); every test has its own roscore port and database, so they do not interfere.
+# TEST_WORKERS sets the number of workers (default 3: most tests wait on ROS processes and
+# servers rather than compute); TEST_WORKERS=0 runs in this process.
 # Extra pytest arguments pass through: make test TEST_ARGS="-k ros_mongo".
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
-exec python -m pytest --durations=20 "$@"
+workers="${TEST_WORKERS:-3}"
+parallel=()
+if [ "$workers" != "0" ]; then
+  parallel=(-n "$workers" --dist loadfile)
+fi
+exec python -m pytest --durations=25 "${parallel[@]}" "$@"

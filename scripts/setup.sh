@@ -112,7 +112,7 @@ step_catkin() {
   # from /usr/bin/python3, so it sees catkin_pkg) goes into the devel-space node relays' shebang,
   # so nodes started by roslaunch see the pinned pip packages.
   (PATH="/usr/bin:/bin:$PATH" catkin_make -DPYTHON_EXECUTABLE="$ROOT/.venv/bin/python3" \
-    -DCATKIN_ENABLE_TESTING=OFF --force-cmake) >"$STAMPS/catkin.log" 2>&1 \
+    -DCATKIN_ENABLE_TESTING=ON --force-cmake) >"$STAMPS/catkin.log" 2>&1 \
     || { tail -40 "$STAMPS/catkin.log"; exit 1; }
   echo "$want" >"$STAMPS/catkin"
   log "catkin workspace: done in $(elapsed "$start")"

@@ -1,4 +1,4 @@
-"""`catkin_make install` works, and a node runs from the install space alone (issue 16).
+"""`catkin_make install` and `catkin_make run_tests` work; a node runs from the install space alone.
 
 The workspace's sources are built and installed into a temporary directory (its own build,
 devel and install folders: the workspace's build/ and devel/ are never touched), with Noetic's
@@ -13,9 +13,16 @@ To keep the suite's time reasonable only robot_common and robot_sim are built
 (-DCATKIN_WHITELIST_PACKAGES; the whole workspace takes several minutes, mostly message
 generation: see the README's Tests section); every package's install rules are checked by
 catkin_lint in tests/test_manifests.py.
+
+The same build (testing enabled, as a ROS developer's would be) then runs `catkin_make run_tests`:
+each package's pytest suite and its launch-file check (robot_common's `robot_common_add_pytests`,
+roslaunch's `roslaunch_add_file_check`) leave JUnit XML under build/test_results, which
+`catkin_test_results` sums up.
 """
 import os
+import re
 import subprocess
+import xml.etree.ElementTree as ElementTree
 from pathlib import Path
 from typing import Dict
 
@@ -44,7 +51,7 @@ def install_space(tmp_path_factory) -> Path:
                f"-DCATKIN_DEVEL_PREFIX={folder / 'devel'}",
                f"-DCMAKE_INSTALL_PREFIX={folder / 'install'}",
                f"-DCATKIN_WHITELIST_PACKAGES={';'.join(PACKAGES)}",
-               f"-DPYTHON_EXECUTABLE={_python()}", "-DCATKIN_ENABLE_TESTING=OFF", "install"]
+               f"-DPYTHON_EXECUTABLE={_python()}", "-DCATKIN_ENABLE_TESTING=ON", "install"]
     env = _clean_env()
     result = subprocess.run(command, cwd=folder, env=env, capture_output=True, text=True,
                             timeout=1200)
@@ -121,3 +128,33 @@ def test_a_node_runs_from_the_install_space(install_space, roscore, rospy_node, 
     assert grid.info.width > 10 and grid.info.height > 10
     assert len(grid.data) == grid.info.width * grid.info.height
     assert {0, 100} <= set(grid.data)          # free and occupied cells of the generated floor
+
+
+def _collected_tests(test_dir: Path) -> int:
+    """How many tests pytest itself collects in a folder (an independent count)."""
+    listed = subprocess.run([_python(), "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider",
+                             str(test_dir)], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    return sum(1 for line in listed.stdout.splitlines() if "::" in line)
+
+
+def test_catkin_make_run_tests_runs_each_packages_tests_and_launch_checks(install_space):
+    folder = install_space.parent
+    results = folder / "build" / "test_results"
+    env = dict(os.environ, PATH=f"/usr/bin:/bin:{os.environ['PATH']}")
+    run = subprocess.run(["catkin_make", "--directory", str(folder), "--source", str(ROOT / "src"),
+                          "--build", str(folder / "build"), "run_tests"],
+                         cwd=folder, env=env, capture_output=True, text=True, timeout=1800)
+    assert run.returncode == 0, f"catkin_make run_tests failed:\n{run.stdout[-4000:]}\n{run.stderr[-4000:]}"
+    for package in PACKAGES:
+        report = results / package / f"pytest-{package}.xml"
+        assert report.is_file(), sorted(p.name for p in (results / package).glob("*"))
+        suite = ElementTree.parse(report).getroot()
+        suite = suite if suite.tag == "testsuite" else suite.find("testsuite")
+        assert int(suite.get("tests")) == _collected_tests(ROOT / "src" / package / "test")
+        assert (int(suite.get("failures")), int(suite.get("errors"))) == (0, 0), report.read_text()[-3000:]
+    assert (results / "robot_sim" / "roslaunch-check_launch.xml").is_file()
+    summary = subprocess.run(["catkin_test_results", str(results)], env=env, capture_output=True,
+                             text=True, timeout=120)
+    assert summary.returncode == 0, summary.stdout + summary.stderr
+    found = re.search(r"Summary: (\d+) tests, 0 errors, 0 failures", summary.stdout)
+    assert found and int(found.group(1)) > 50, summary.stdout

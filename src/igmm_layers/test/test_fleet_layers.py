@@ -12,9 +12,9 @@ import requests
 import rospy
 from geometry_msgs.msg import Point
 
+from igmm_layers.cluster_store import save_cluster_set
 from igmm_layers.msg import ClusterSet, ObjectCluster
 from igmm_layers.params import LayerServerConfig
-from igmm_layers.ros_persistence import save_cluster_set
 from igmm_layers.srv import LayerInfo, LocateObjects
 from robot_common.errors import ConfigError
 from robot_common.msg import ObjectObservation

@@ -16,8 +16,8 @@ from typing import Any, Dict, List, Tuple
 import rospy
 from geometry_msgs.msg import Vector3
 
+from igmm_layers.cluster_store import CLUSTER_TOPIC
 from igmm_layers.msg import ClusterSet
-from igmm_layers.ros_persistence import CLUSTER_TOPIC
 from robot_common.msg import ObjectObservation
 from ros_mongo.errors import StoreError
 

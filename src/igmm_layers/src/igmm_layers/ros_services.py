@@ -10,11 +10,11 @@ from typing import Dict, List
 import numpy as np
 import rospy
 
+from igmm_layers.cluster_store import load_cluster_set, save_cluster_set
 from igmm_layers.errors import IGMMError, InvalidInputError, PersistenceError
 from igmm_layers.layers import LAYER_KINDS, ClusterTable, check_kind
 from igmm_layers.queries import alternate_classes, closest, count_observed, most_likely, pair_likelihood
 from igmm_layers.ros_convert import cluster_msg, cluster_msgs, cluster_set
-from igmm_layers.ros_persistence import load_cluster_set, save_cluster_set
 from igmm_layers.srv import (
     AlternateObject,
     CountObjects,

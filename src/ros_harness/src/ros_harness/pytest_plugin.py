@@ -22,6 +22,7 @@ from pathlib import Path
 
 import pytest
 
+from ros_harness.errors import HarnessError
 from ros_harness.launching import LaunchSet
 from ros_harness.processes import (
     START_TIMEOUT,
@@ -147,12 +148,26 @@ def own_db_server(request):
 
 @pytest.fixture(scope="session")
 def xvfb_display(tmp_path_factory):
-    number = next(n for n in range(99, 200) if not Path(f"/tmp/.X{n}-lock").exists()
-                  and not Path(f"/tmp/.X11-unix/X{n}").exists())
-    log = tmp_path_factory.mktemp("xvfb") / "xvfb.log"
-    xvfb = ManagedProcess(["Xvfb", f":{number}", "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
-                          name="Xvfb", log_path=log).start()
-    wait_until(lambda: Path(f"/tmp/.X11-unix/X{number}").exists(), START_TIMEOUT, what="Xvfb socket",
-               check=xvfb.check_alive)
+    log_dir = tmp_path_factory.mktemp("xvfb")
+    xvfb, number = _start_xvfb(log_dir)
     yield f":{number}"
     xvfb.stop(timeout=5)
+
+
+def _start_xvfb(log_dir: Path):
+    """Xvfb on the first free display number. Parallel test workers may pick the same number at
+    once: Xvfb itself takes the display's lock file, and the loser exits, so try the next one."""
+    for number in range(99, 200):
+        if Path(f"/tmp/.X{number}-lock").exists() or Path(f"/tmp/.X11-unix/X{number}").exists():
+            continue
+        xvfb = ManagedProcess(["Xvfb", f":{number}", "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
+                              name="Xvfb", log_path=log_dir / f"xvfb_{number}.log").start()
+        try:
+            wait_until(lambda: Path(f"/tmp/.X11-unix/X{number}").exists() or not xvfb.alive(),
+                       START_TIMEOUT, what="Xvfb socket", check=None)
+        except TimeoutError:
+            xvfb.stop(timeout=5)
+            raise
+        if xvfb.alive():
+            return xvfb, number
+    raise HarnessError("no free X display number between :99 and :199")

@@ -2,7 +2,7 @@
 """Latency of the layer server's services with 10,000 clusters, through ROS (real roscore and
 node), against the same handlers called in-process (no ROS transport).
 
-    python bench/igmm_service_latency.py [--quick] [--calls N] [--clusters N]
+    python bench/igmm_layers/igmm_service_latency.py [--quick] [--calls N] [--clusters N]
 
 The clusters (20 classes, 500 each by default, one 200 m x 200 m region) are published as one
 ClusterSet on /igmm_layers/restore, the way load_clusters restores a saved set. Each service is
@@ -38,8 +38,8 @@ from igmm_layers.srv import (
 )
 from ros_harness import RosCore, RosLaunch, wait_until
 
-OUT_DIR = Path(__file__).resolve().parent.parent / "artifacts" / "bench"
-CONFIG = Path(__file__).resolve().parent.parent / "src" / "igmm_layers" / "config" / "igmm_layers.yaml"
+OUT_DIR = Path(__file__).resolve().parents[2] / "artifacts" / "bench"
+CONFIG = Path(__file__).resolve().parents[2] / "src" / "igmm_layers" / "config" / "igmm_layers.yaml"
 REGION = "bench"
 
 

@@ -2,7 +2,7 @@
 """Speed of the IncrementalGMM update: updates/s at D = 2, K = 50 (target >= 50,000/s), and the
 cost growth with the dimension D up to 32 (O(K D^2) per update from rank-one updates).
 
-    python bench/igmm_speed.py [--quick] [--repeats N]
+    python bench/igmm_layers/igmm_speed.py [--quick] [--repeats N]
 
 Peers from the same run: the slow literal reference (igmm_layers.sim.reference: inverse and
 determinant recomputed for every component and update, O(K D^3)), and the same vectorised update
@@ -25,7 +25,7 @@ from threadpoolctl import threadpool_limits
 from igmm_layers import IncrementalGMM
 from igmm_layers.sim.reference import ReferenceIGMM
 
-OUT_DIR = Path(__file__).resolve().parent.parent / "artifacts" / "bench"
+OUT_DIR = Path(__file__).resolve().parents[2] / "artifacts" / "bench"
 TARGET_UPDATES_PER_S = 50000
 
 

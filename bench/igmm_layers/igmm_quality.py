@@ -2,7 +2,7 @@
 """Quality of the object layers' IncrementalGMM on synthetic scenes with known truth, against
 scikit-learn's GaussianMixture and BayesianGaussianMixture tuned on separate validation scenes.
 
-    python bench/igmm_quality.py [--quick] [--val-scenes N] [--scenes N] [--orders N]
+    python bench/igmm_layers/igmm_quality.py [--quick] [--val-scenes N] [--scenes N] [--orders N]
 
 Scenes (robot_sim.detections): objects placed uniformly at least `min_separation` apart, a
 Poisson number of detections per object with Gaussian noise, uniform clutter making up a share of
@@ -44,7 +44,7 @@ from igmm_layers import LayerParams
 from igmm_layers.sim.metrics import match_scores, ospa
 from robot_sim.detections import random_scene, simulate_detections
 
-OUT_DIR = Path(__file__).resolve().parent.parent / "artifacts" / "bench"
+OUT_DIR = Path(__file__).resolve().parents[2] / "artifacts" / "bench"
 MIN_SUPPORT = 3.0
 SCENARIOS = {
     "standard, no clutter": dict(objects=10, size=20.0, separation=1.5, rate=20, noise=0.1, clutter=0.0),
