@@ -1,7 +1,10 @@
 """Bag -> database -> bag, byte for byte, on both backends; the command-line tool and its errors."""
+import os
 import re
+import signal
 import subprocess
 import sys
+import uuid
 
 import genpy
 import pytest
@@ -14,6 +17,7 @@ from std_msgs.msg import Header
 from ros_harness import wait_until
 from ros_mongo import BagError, open_store, parse_query
 from ros_mongo.bagio import export_bag, import_bag, iter_bag
+from ros_mongo.cli import parse_args, run
 
 pytestmark = pytest.mark.db
 
@@ -122,3 +126,92 @@ def test_bag_converter_launch(roslaunch, couchdb_url, tmp_path):
     assert launch.wait_for_exit(120) == 0, launch.log_tail()
     with open_store(couchdb_url) as store:
         wait_until(lambda: store.count_messages(tags=["converted"]) == 56, 90, what="imported messages")
+
+
+def write_chunked_bag(path):
+    """Two topics over many small chunks (as `rosbag record --chunksize` makes them)."""
+    with rosbag.Bag(str(path), "w", chunk_threshold=2048) as bag:
+        for i in range(60):
+            stamp = genpy.Time(1_700_000_000 + i, 0)
+            bag.write("/odom", Odometry(header=Header(seq=i, stamp=stamp, frame_id="odom")), stamp)
+            if i % 4 == 0:
+                bag.write("/joint_states", JointState(name=["a"] * 10, position=[0.1 * i] * 10),
+                          stamp + genpy.Duration(0, 5))
+
+
+def rosbag_reindexed(path, tmp_path):
+    """What `rosbag reindex` (the real tool, on a copy) makes of an unindexed bag."""
+    copy = tmp_path / "reindexed" / path.name
+    copy.parent.mkdir()
+    copy.write_bytes(path.read_bytes())
+    done = subprocess.run(["rosbag", "reindex", "-q", str(copy)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    return copy
+
+
+def test_an_unindexed_bag_imports_what_rosbag_reindex_recovers(db_url, tmp_path):
+    intact, cut = tmp_path / "intact.bag", tmp_path / "cut.bag"
+    write_chunked_bag(intact)
+    with rosbag.Bag(str(intact)) as bag:
+        chunks = sorted(bag._chunks, key=lambda c: c.pos)
+    assert len(chunks) > 10
+    data = intact.read_bytes()[:chunks[8].pos + 30]  # cut inside the ninth chunk: no index at all
+    cut.write_bytes(data)
+    with pytest.raises(rosbag.ROSBagUnindexedException):
+        rosbag.Bag(str(cut))
+    reindexed = rosbag_reindexed(cut, tmp_path)
+    _, expected = bag_contents(reindexed)
+    # rosbag recovers whole chunks: the first `kept` ones (7 or 8 of the 8 complete ones)
+    totals = [sum(sum(c.connection_counts.values()) for c in chunks[:k]) for k in range(10)]
+    kept = totals.index(len(expected))
+    assert kept in (7, 8)
+    with open_store(db_url) as store:
+        result = import_bag(cut, store, progress=False)
+        assert result.messages == len(expected) and store.count() == len(expected)
+        assert result.recovery.messages == len(expected) and result.recovery.topics == 2
+        assert result.recovery.skipped_bytes == len(data) - chunks[kept].pos
+        # the same ids as the bag rosbag reindex writes: importing that one stores nothing new
+        assert import_bag(reindexed, store, progress=False).recovery is None
+        assert store.count() == len(expected)
+        out = tmp_path / "out.bag"
+        export_bag(store, parse_query(""), out, progress=False)
+    assert bag_contents(out)[1] == expected
+    assert cut.read_bytes() == data  # the file itself is never modified (rosbag reindex truncates)
+
+
+@pytest.mark.ros
+def test_a_bag_left_by_a_killed_rosbag_record_is_recovered(rospy_node, couchdb_url, mongodb_url, tmp_path,
+                                                           capsys):
+    """A real `rosbag record` of a real roscore, killed with SIGKILL while recording: its
+    .bag.active file imports (CLI into CouchDB, API into MongoDB) as `rosbag reindex` recovers it."""
+    from std_msgs.msg import String
+
+    topic, size = f"/recorded_{uuid.uuid4().hex[:8]}", 3000
+    active = tmp_path / "crash.bag.active"
+    publisher = rospy_node.Publisher(topic, String, queue_size=100)
+    record = subprocess.Popen(["rosbag", "record", "--chunksize=1", "-O", str(tmp_path / "crash.bag"), topic],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        wait_until(lambda: publisher.get_num_connections() > 0, 90, what="rosbag record subscribed")
+        sent = [f"message {i:03d} " + "x" * size for i in range(40)]
+        for text in sent:
+            publisher.publish(String(data=text))
+        wait_until(lambda: active.exists() and active.stat().st_size > 30 * size, 90,
+                   what="30 messages on disk")
+    finally:
+        os.killpg(record.pid, signal.SIGKILL)  # its own process group: the rosbag script and its recorder
+        record.wait()
+        publisher.unregister()
+    _, expected = bag_contents(rosbag_reindexed(active, tmp_path))
+    texts = [String().deserialize(raw).data for _, _, raw in expected]
+    assert len(texts) >= 25 and texts == sent[:len(texts)]
+    run(parse_args(["--no-progress", "--db-url", couchdb_url, "import", str(active)]))  # the command
+    done = capsys.readouterr()
+    assert f"{len(texts)} messages" in done.out, done.err
+    assert re.search(rf"WARNING: .*crash.bag.active: unindexed bag: recovered {len(texts)} messages on 1 "
+                     rf"topics, skipped \d+ unreadable bytes", done.err), done.err
+    for url in (couchdb_url, mongodb_url):
+        with open_store(url) as store:
+            if url == mongodb_url:
+                assert import_bag(active, store, progress=False).messages == len(texts)
+            assert [m.raw for m in store.find_messages(topic=topic)] == [raw for _, _, raw in expected]

@@ -1,5 +1,8 @@
-"""Bags to the database and back, losslessly: topics, types, md5sums, definitions, connection
-headers (latching, callerid), receive times and the exact serialized bytes.
+"""Log files (ROS 1 bags, MCAP) to the database and back, losslessly: topics, types, md5sums,
+definitions, connection headers (latching, callerid), receive times and the exact serialized
+bytes. The formats sit behind one reader / writer shape and a registry by name
+(`ros_mongo.formats`): `ros_mongo.bagfile` (bags, also unindexed ones) and `ros_mongo.mcapio`
+(MCAP, what Foxglove opens).
 
 Importing decodes each message for the queryable fields on the main thread while a writer thread
 sends the previous batch to the database (one bulk request per batch).
@@ -9,34 +12,41 @@ Contracts:
   (default `BATCH_BYTES`, 16 MB) of serialized messages or `batch_size` messages, whichever comes
   first (a single larger message is a batch of its own), and at most three batches exist at once
   (one being filled, one queued, one being written), so an import holds about 3 x 16 MB of
-  message bytes whatever the bag holds. `TransferResult.peak_batch_bytes` reports the most bytes
+  message bytes whatever the file holds. `TransferResult.peak_batch_bytes` reports the most bytes
   held in batches at once.
-- Import is idempotent: a message's id derives from the bag's fingerprint (start and end time,
-  connections, message count; not its file name or path), its topic and its index within that
-  topic, and the robot id, so importing a bag again, under another name, or first with --topics
-  and then whole, stores nothing twice.
+- Import is idempotent: a message's id derives from the file's fingerprint (start and end time,
+  connections, message count; not its file name, path or format), its topic and its index within
+  that topic, and the robot id, so importing a file again, under another name, as the MCAP export
+  of the same bag, or first with --topics and then whole, stores nothing twice.
+- An unindexed bag (a crashed `rosbag record`) is imported as far as it is readable, as
+  `rosbag reindex` would recover it; `TransferResult.recovery` says how much (the file is never
+  modified).
 - Every connection keeps its own topic info (callerid, latching, definition; source: the robot id,
   else the session id), so a /tf with several publishers and several bags or robots in one
-  database come back out exactly (export writes one bag connection per publisher and source).
+  database come back out exactly (export writes one bag connection / MCAP channel per publisher
+  and source).
 """
 import hashlib
-import os
 import queue
 import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, Iterator, List, Optional, Sequence, Tuple, Union
+from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 import genpy
 
+from ros_mongo import bagfile, mcapio  # noqa: F401 - they register the bag and MCAP formats
 from ros_mongo.backends.base import PreparedRecords
+from ros_mongo.bagfile import iter_bag
 from ros_mongo.errors import BagError, StoreError, UnknownTypeError
+from ros_mongo.formats import Recovery, format_for_path, format_of_file
 from ros_mongo.query import Query
 from ros_mongo.records import MessageRecord, TopicInfo, make_record, new_message_id
 from ros_mongo.store import MessageStore
 
-__all__ = ["import_bag", "export_bag", "TransferResult", "BATCH_BYTES", "BATCH_SIZE"]
+__all__ = ["import_file", "export_file", "import_bag", "export_bag", "iter_bag", "TransferResult",
+           "BATCH_BYTES", "BATCH_SIZE"]
 
 #: Import batches close at this many bytes of serialized messages ...
 BATCH_BYTES = 16 * 1024 * 1024
@@ -50,6 +60,7 @@ class TransferResult:
     bytes: int
     seconds: float
     peak_batch_bytes: int = 0
+    recovery: Optional[Recovery] = None  # what an unindexed / unfinished file lost
 
     @property
     def rate(self) -> float:
@@ -60,90 +71,70 @@ class TransferResult:
         return self.bytes / 1e6 / self.seconds if self.seconds > 0 else 0.0
 
 
-def _open_bag(path: Union[str, Path], mode: str = "r", **options):
-    import rosbag
+def import_file(path: Union[str, Path], store: MessageStore, *, topics: Optional[Sequence[str]] = None,
+                tags: Sequence[str] = (), session_id: Optional[str] = None, robot_id: Optional[str] = None,
+                batch_size: int = BATCH_SIZE, batch_bytes: int = BATCH_BYTES,
+                progress: bool = True) -> TransferResult:
+    """Store every message of the bag or MCAP file (or of `topics`); the receive time is the log
+    time. The format is recognised by the file's first bytes.
 
-    try:
-        return rosbag.Bag(str(path), mode, **options)
-    except (rosbag.ROSBagException, OSError, ValueError) as err:
-        raise BagError(f"cannot {'read' if mode == 'r' else 'write'} bag {path}: {err}") from None
-
-
-def import_bag(path: Union[str, Path], store: MessageStore, *, topics: Optional[Sequence[str]] = None,
-               tags: Sequence[str] = (), session_id: Optional[str] = None, robot_id: Optional[str] = None,
-               batch_size: int = BATCH_SIZE, batch_bytes: int = BATCH_BYTES,
-               progress: bool = True) -> TransferResult:
-    """Store every message of the bag (or of `topics`); the receive time is the bag time.
-
-    Ids derive from the bag's fingerprint, the topic, the message's index within its topic and
-    the robot id, so importing the same bag again stores nothing twice (see the module doc).
+    Ids derive from the file's fingerprint, the topic, the message's index within its topic and
+    the robot id, so importing the same messages again stores nothing twice (see the module doc).
     """
-    import rosbag
     from tqdm import tqdm
 
     if batch_size < 1 or batch_bytes < 1:
         raise BagError(f"batch_size and batch_bytes must be positive, got {batch_size!r}, {batch_bytes!r}")
-    session_id = session_id or Path(path).stem
+    session_id = session_id or _session_name(path)
     started, count, size = time.monotonic(), 0, 0
     writer = _BatchWriter(store)
-    with _open_bag(path) as bag:
-        fingerprint = _fingerprint(bag)
+    with format_of_file(path).reader(path, progress=progress) as reader:
         source = robot_id or session_id
-        total = bag.get_message_count(topic_filters=list(topics) if topics else None)
-        bar = tqdm(total=total, unit="msg", desc=f"import {Path(path).name}", disable=not progress)
+        bar = tqdm(total=reader.count(topics), unit="msg", desc=f"import {Path(path).name}",
+                   disable=not progress)
         infos: List[TopicInfo] = []
         records: List[MessageRecord] = []
         batch_weight = 0
         seen: Dict[Tuple[str, str, str, str], TopicInfo] = {}
         per_topic: Dict[str, int] = {}
         try:
-            for topic, raw, stamp, header in bag.read_messages(topics=topics, raw=True,
-                                                               return_connection_header=True):
-                msg_type, data, md5sum, _pos, pytype = raw
-                info = _topic_info(topic, header, source)
+            for message in reader.messages(topics):
+                info = _topic_info(message.topic, message.header, source)
                 if info.key not in seen:
                     seen[info.key] = info
                     infos.append(info)
-                index = per_topic.get(topic, 0)
-                per_topic[topic] = index + 1
-                record_id = _bag_id(fingerprint, topic, index, stamp, robot_id)
-                records.append(_record(topic, pytype, msg_type, md5sum, data, stamp, record_id, tags,
-                                       session_id, robot_id, store.max_array_len, info.callerid))
+                index = per_topic.get(message.topic, 0)
+                per_topic[message.topic] = index + 1
+                record_id = _bag_id(reader.fingerprint, message.topic, index, message.stamp, robot_id)
+                records.append(_record(message, record_id, tags, session_id, robot_id,
+                                       store.max_array_len, info.callerid))
                 count += 1
-                size += len(data)
-                batch_weight += len(data)
+                size += len(message.data)
+                batch_weight += len(message.data)
                 if len(records) >= batch_size or batch_weight >= batch_bytes:
                     writer.put(infos, store.prepare_records(records), batch_weight)
                     bar.update(len(records))
                     infos, records, batch_weight = [], [], 0
             writer.put(infos, store.prepare_records(records), batch_weight)
             bar.update(len(records))
-        except (rosbag.ROSBagException, OSError) as err:
-            raise BagError(f"cannot read bag {path}: {err}") from None
         finally:
             writer.close()
             bar.close()
-    return TransferResult(count, size, time.monotonic() - started, writer.peak_bytes)
+    return TransferResult(count, size, time.monotonic() - started, writer.peak_bytes, reader.recovery)
 
 
-def _fingerprint(bag) -> str:
-    """What identifies a bag's content without reading it all: its time span, message count and
-    connections (topic, type, md5sum, callerid)."""
-    connections = sorted((c.topic, c.datatype, c.md5sum, _text(c.header, "callerid"))
-                         for c in bag._get_connections())
-    key = f"{bag.get_start_time()!r}\n{bag.get_end_time()!r}\n{bag.get_message_count()}\n{connections!r}"
-    return hashlib.sha1(key.encode()).hexdigest()
+def _session_name(path: Union[str, Path]) -> str:
+    """The default session id: the file name without its suffix (.bag, .bag.active, .mcap)."""
+    name = Path(path).name
+    if name.endswith(".active") and len(name) > len(".active"):
+        name = name[:-len(".active")]
+    return Path(name).stem
 
 
-def _text(header: Dict[str, bytes], key: str) -> str:
-    value = header.get(key, b"")
-    return value.decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
-
-
-def _topic_info(topic: str, header: Dict[str, bytes], source: str) -> TopicInfo:
-    return TopicInfo(topic, _text(header, "type"), _text(header, "md5sum"),
-                     _text(header, "message_definition"), _text(header, "latching") == "1",
-                     _text(header, "callerid"), source)
+def _topic_info(topic: str, header: Dict[str, str], source: str) -> TopicInfo:
+    return TopicInfo(topic, header.get("type", ""), header.get("md5sum", ""),
+                     header.get("message_definition", ""), header.get("latching", "") == "1",
+                     header.get("callerid", ""), source)
 
 
 def _bag_id(fingerprint: str, topic: str, index: int, stamp: genpy.Time, robot_id: Optional[str]) -> str:
@@ -151,14 +142,15 @@ def _bag_id(fingerprint: str, topic: str, index: int, stamp: genpy.Time, robot_i
     return new_message_id(stamp.secs, stamp.nsecs, robot_id, token=token)
 
 
-def _record(topic, pytype, msg_type, md5sum, data, stamp, record_id, tags, session_id, robot_id,
-            max_array_len, callerid) -> MessageRecord:
-    if pytype is not None and pytype._md5sum == md5sum:
-        return make_record(topic, pytype, data, receive=stamp, tags=tags, session_id=session_id,
-                           robot_id=robot_id, record_id=record_id, max_array_len=max_array_len,
-                           callerid=callerid)
-    return MessageRecord(record_id, topic, msg_type, md5sum, bytes(data), stamp.secs, stamp.nsecs,
-                         tags=list(tags), session_id=session_id, robot_id=robot_id, callerid=callerid)
+def _record(message, record_id, tags, session_id, robot_id, max_array_len, callerid) -> MessageRecord:
+    pytype, stamp = message.pytype, message.stamp
+    if pytype is not None and pytype._md5sum == message.md5sum:
+        return make_record(message.topic, pytype, message.data, receive=stamp, tags=tags,
+                           session_id=session_id, robot_id=robot_id, record_id=record_id,
+                           max_array_len=max_array_len, callerid=callerid)
+    return MessageRecord(record_id, message.topic, message.msg_type, message.md5sum, bytes(message.data),
+                         stamp.secs, stamp.nsecs, tags=list(tags), session_id=session_id,
+                         robot_id=robot_id, callerid=callerid)
 
 
 class _BatchWriter:
@@ -211,36 +203,27 @@ class _BatchWriter:
                     self.held -= weight
 
 
-def export_bag(store: MessageStore, query: Query, path: Union[str, Path], *, overwrite: bool = False,
-               compression: str = "none", progress: bool = True) -> TransferResult:
-    """Write the messages matching `query` to a new bag, in receive-time order, one connection per
-    stored topic info (publisher and source). Memory: one message at a time (the store reads in
-    pages of bounded size; bytes kept apart are fetched per message)."""
+def export_file(store: MessageStore, query: Query, path: Union[str, Path], *,
+                file_format: Optional[str] = None, overwrite: bool = False, compression: str = "none",
+                progress: bool = True) -> TransferResult:
+    """Write the messages matching `query` to a new bag or MCAP file (`file_format` "bag" or
+    "mcap"; default: by the suffix, .mcap or else a bag), in receive-time order, one connection /
+    channel per stored topic info (publisher and source). Refuses to overwrite an existing file
+    unless `overwrite`. Memory: one message at a time (the store reads in pages of bounded size;
+    bytes kept apart are fetched per message)."""
     from tqdm import tqdm
 
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise BagError(f"bag {path} exists; choose another name or overwrite it explicitly")
+    writer = format_for_path(path, file_format).writer(path, overwrite=overwrite, compression=compression)
     infos = _InfoIndex(store.topics())
     total = store.count(query)
     started, count, size = time.monotonic(), 0, 0
-    partial = Path(str(path) + ".partial")
-    bag = _open_bag(partial, "w", compression=compression)
-    connections = _Connections(bag)
-    try:
-        with tqdm(total=total, unit="msg", desc=f"export {path.name}", disable=not progress) as bar:
-            for stored in store.find(query):
-                info = infos.lookup(stored)
-                connections.write(info, stored)
-                count += 1
-                size += len(stored.raw)
-                bar.update(1)
-        bag.close()
-        os.replace(partial, path)
-    except BaseException:
-        bag.close()
-        partial.unlink(missing_ok=True)
-        raise
+    with writer, tqdm(total=total, unit="msg", desc=f"export {path.name}", disable=not progress) as bar:
+        for stored in store.find(query):
+            writer.write(infos.lookup(stored), stored)
+            count += 1
+            size += len(stored.raw)
+            bar.update(1)
     return TransferResult(count, size, time.monotonic() - started)
 
 
@@ -268,44 +251,6 @@ class _InfoIndex:
         return info
 
 
-class _Connections:
-    """Writes messages with one bag connection per topic info. rosbag's Python writer keeps one
-    connection per topic (the first header wins), so the writer's current connection of a topic
-    is switched before each write (rosbag's `_topic_connections`, as in ROS Noetic's rosbag)."""
-
-    def __init__(self, bag):
-        self.bag = bag
-        self.by_info: Dict[tuple, object] = {}
-        self.types: Dict[str, Tuple[str, str]] = {}
-        self.switch = isinstance(getattr(bag, "_topic_connections", None), dict)
-
-    def write(self, info: TopicInfo, stored) -> None:
-        earlier = self.types.setdefault(stored.topic, (info.msg_type, info.md5sum))
-        if earlier != (info.msg_type, info.md5sum):
-            raise BagError(f"topic {stored.topic} holds both {earlier[0]} and {stored.msg_type}; a bag "
-                           f"keeps one type per topic: export them separately with a type filter")
-        header = {"topic": info.topic, "type": info.msg_type, "md5sum": info.md5sum,
-                  "message_definition": info.definition, "latching": "1" if info.latching else "0"}
-        if info.callerid:
-            header["callerid"] = info.callerid
-        stub = type("StoredType", (), {"_type": info.msg_type, "_md5sum": info.md5sum,
-                                       "_full_text": info.definition})
-        if self.switch:
-            connection = self.by_info.get(info.key)
-            if connection is not None:
-                self.bag._topic_connections[stored.topic] = connection
-            else:
-                self.bag._topic_connections.pop(stored.topic, None)
-        self.bag.write(stored.topic, (stored.msg_type, stored.raw, stored.md5sum, None, stub),
-                       t=stored.receive_stamp, raw=True, connection_header=header)
-        if self.switch and info.key not in self.by_info:
-            self.by_info[info.key] = self.bag._topic_connections[stored.topic]
-
-
-def iter_bag(path: Union[str, Path]) -> Iterator[Tuple[str, bytes, genpy.Time, Dict[str, str]]]:
-    """(topic, raw bytes, bag time, connection header) of every message (for checks and tests)."""
-    with _open_bag(path) as bag:
-        for topic, raw, stamp, header in bag.read_messages(raw=True, return_connection_header=True):
-            yield topic, bytes(raw[1]), stamp, {k: (v.decode() if isinstance(v, bytes) else v)
-                                                 for k, v in header.items()}
-
+#: The names the bag-only versions had.
+import_bag = import_file
+export_bag = export_file

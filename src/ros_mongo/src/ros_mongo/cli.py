@@ -1,7 +1,9 @@
-"""`ros_mongo_bag`: bags into the database and back, with a progress bar.
+"""`ros_mongo_bag`: bags and MCAP files into the database and back, with a progress bar.
 
-    ros_mongo_bag import run1.bag run2.bag --db-url http://127.0.0.1:5984/robot_data --tags lab
+    ros_mongo_bag import run1.bag run2.mcap --db-url http://127.0.0.1:5984/robot_data --tags lab
     ros_mongo_bag export out.bag --db-url mongodb://127.0.0.1:27017/robot_data --query "tags lidar"
+    ros_mongo_bag export session.mcap --session-id run1     (MCAP for Foxglove; or --format mcap)
+    ros_mongo_bag import crashed.bag.active       (an unindexed bag: recovers what is readable)
     ros_mongo_bag info --db-url http://127.0.0.1:5984/robot_data
     ros_mongo_bag setup --db-url http://admin@127.0.0.1:5984/robot_data --db-credentials-file ~/.admin
     ros_mongo_bag migrate --from-url mongodb://127.0.0.1:27017 --db-url mongodb://127.0.0.1:27017/test_database
@@ -27,8 +29,9 @@ from pathlib import Path
 from typing import List, Optional
 
 from ros_mongo.allocator import keep_freed_memory
-from ros_mongo.bagio import BATCH_BYTES, export_bag, import_bag
+from ros_mongo.bagio import BATCH_BYTES, export_file, import_file
 from ros_mongo.errors import StoreError
+from ros_mongo.formats import format_names
 from ros_mongo.legacy import (
     DEFAULT_BAG_NAME,
     LEGACY_COLLECTION,
@@ -39,7 +42,7 @@ from ros_mongo.legacy import (
 )
 from ros_mongo.query import parse_query, query_from_mapping
 from ros_mongo.store import open_store
-from ros_mongo.urls import PASSWORD_ENV, password_in_url, redact_url
+from ros_mongo.urls import PASSWORD_ENV, password_warning, redact_url
 
 __all__ = ["main"]
 
@@ -57,8 +60,9 @@ def parse_args(argv: List[str]) -> argparse.Namespace:
                         help=f"file holding 'user:password' or 'password' (else ${PASSWORD_ENV})")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     commands = parser.add_subparsers(dest="command", required=True)
-    up = commands.add_parser("import", help="store the messages of bags")
-    up.add_argument("bags", nargs="+", help="bag files")
+    up = commands.add_parser("import", help="store the messages of bags or MCAP files")
+    up.add_argument("bags", nargs="+", help="bag or MCAP files (recognised by their content; "
+                                            "unindexed bags are recovered as far as readable)")
     up.add_argument("--topics", nargs="*", help="only these topics")
     up.add_argument("--tags", nargs="*", default=[], help="tags for every message")
     up.add_argument("--session-id", help="session id (default: the bag's file name)")
@@ -66,15 +70,18 @@ def parse_args(argv: List[str]) -> argparse.Namespace:
     up.add_argument("--batch-mb", type=float, default=BATCH_BYTES / 2 ** 20,
                     help=f"MB of messages per write batch (default {BATCH_BYTES / 2 ** 20:g}; at most "
                          f"three batches are held at once)")
-    down = commands.add_parser("export", help="write stored messages to a new bag")
-    down.add_argument("bag", help="the bag to write (refuses to overwrite without --force)")
+    down = commands.add_parser("export", help="write stored messages to a new bag or MCAP file")
+    down.add_argument("bag", help="the file to write (refuses to overwrite without --force)")
+    down.add_argument("--format", choices=format_names(), default=None, dest="file_format",
+                      help="bag or mcap (default: mcap for a .mcap file name, else bag)")
     down.add_argument("--query", default="", help='YAML/JSON query or "<key> <value>" ("tags lidar")')
     down.add_argument("--topics", nargs="*", help="only these topics")
     down.add_argument("--tags", nargs="*", help="only messages with all these tags")
     down.add_argument("--session-id", help="only this session")
     down.add_argument("--start-time", type=float, help="receive time from (s)")
     down.add_argument("--end-time", type=float, help="receive time until (s)")
-    down.add_argument("--compression", choices=["none", "bz2", "lz4"], default="none")
+    down.add_argument("--compression", choices=["none", "bz2", "lz4", "zstd"], default="none",
+                      help="bag: none, bz2 or lz4; mcap: none, lz4 or zstd (default none)")
     down.add_argument("--force", action="store_true", help="overwrite an existing bag")
     move = commands.add_parser("migrate", help="read the original mongodb_api's documents into today's "
                                                "layout")
@@ -154,7 +161,7 @@ def _convert_args(args: argparse.Namespace) -> argparse.Namespace:
             raise StoreError("no query given: the bag converter exports with one, e.g. query:='tags lidar'")
         bag.parent.mkdir(parents=True, exist_ok=True)
         return _namespace(args, bag=str(bag), topics=None, tags=None, session_id=None, start_time=None,
-                          end_time=None, compression="none")
+                          end_time=None, compression="none", file_format=None)
     return _namespace(args, bags=[str(bag)], topics=None, session_id=overrides.get("session_id"),
                       robot_id=None, batch_mb=BATCH_BYTES / 2 ** 20)
 
@@ -193,9 +200,10 @@ def _migrate(args: argparse.Namespace, store, progress: bool) -> None:
 
 def run(args: argparse.Namespace) -> None:
     progress = not args.no_progress
-    if password_in_url(args.db_url):
-        print(f"WARNING: the database URL {redact_url(args.db_url)} holds a secret, which shows in `ps` "
-              f"and logs: use --db-credentials-file or ${PASSWORD_ENV}", file=sys.stderr)
+    warning = password_warning(args.db_url,
+                               hint=f"in a file given as --db-credentials-file or in ${PASSWORD_ENV}")
+    if warning:  # once: opening the store does not repeat it
+        print(f"WARNING: {warning}", file=sys.stderr)
     if args.command == "convert":
         args = _convert_args(args)
     with open_store(args.db_url, credentials_file=args.db_credentials_file) as store:
@@ -211,16 +219,18 @@ def run(args: argparse.Namespace) -> None:
             if not args.batch_mb > 0:
                 raise StoreError(f"--batch-mb must be positive, got {args.batch_mb!r}")
             for bag in args.bags:
-                result = import_bag(bag, store, topics=args.topics, tags=args.tags,
-                                    session_id=args.session_id, robot_id=args.robot_id, progress=progress,
-                                    batch_bytes=int(args.batch_mb * 2 ** 20))
+                result = import_file(bag, store, topics=args.topics, tags=args.tags,
+                                     session_id=args.session_id, robot_id=args.robot_id, progress=progress,
+                                     batch_bytes=int(args.batch_mb * 2 ** 20))
+                if result.recovery is not None:
+                    print(f"WARNING: {bag}: {result.recovery.describe()}", file=sys.stderr)
                 print(f"{bag}: {result.messages} messages, {result.bytes / 1e6:.1f} MB in "
                       f"{result.seconds:.1f} s ({result.rate:.0f} msg/s, {result.megabytes_per_second:.1f} "
                       f"MB/s) into {store.url}")
         elif args.command == "export":
             query = _export_query(args)
-            result = export_bag(store, query, args.bag, overwrite=args.force,
-                                compression=args.compression, progress=progress)
+            result = export_file(store, query, args.bag, file_format=args.file_format,
+                                 overwrite=args.force, compression=args.compression, progress=progress)
             print(f"{args.bag}: {result.messages} messages ({query.describe()}), "
                   f"{result.bytes / 1e6:.1f} MB in {result.seconds:.1f} s")
         else:

@@ -22,7 +22,7 @@ log = logging.getLogger(__name__)
 
 
 def open_store(url: str, *, connect: bool = True, credentials_file: Optional[str] = None,
-               **options) -> MessageStore:
+               warn_password: bool = True, **options) -> MessageStore:
     """A store for `url`: http(s):// is CouchDB, mongodb:// (or mongodb+srv://) is MongoDB.
 
     Args:
@@ -30,12 +30,15 @@ def open_store(url: str, *, connect: bool = True, credentials_file: Optional[str
             with False the first operation does it (the recorder starts while the server is down).
         credentials_file: a file holding 'user:password' or 'password' (see ros_mongo.urls);
             without it the password may come from ROS_MONGO_DB_PASSWORD.
+        warn_password: warn once when `url` itself carries a password (it shows in roslaunch's
+            parameter summary); the store's `reopen_args()` turn it off, their URL holds the
+            credentials this process added.
         options: blob_threshold, max_array_len, timeout (seconds).
     """
     check_url(url)
-    url = with_credentials(url, credentials_file=credentials_file)
+    url = with_credentials(url, credentials_file=credentials_file, warn=warn_password)
     store = backend_for_url(url)(url, **options)
-    store._reopen_args = (url, dict(options))
+    store._reopen_args = (url, dict(options, warn_password=False))
     if connect:
         try:
             store.connect()

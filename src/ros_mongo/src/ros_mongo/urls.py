@@ -17,17 +17,29 @@ Contracts:
 - `check_url(url)` raises StoreError for a URL without a scheme, quoting only its redacted form.
 - `scrub(text, url)` removes the URL's password (raw and percent-encoded) from any text, for
   error messages built from driver exceptions.
+- `with_credentials` is the one place every node's database URL goes through (`open_store` calls
+  it, and so do the fleet feeds of the central database): when the URL it is given carries a
+  password, it warns once per process and URL (`warn_password_in_url`) that roslaunch prints
+  parameters (the first characters of `db_url`, password included, in its start-up summary) and
+  names the credentials-file parameters instead. The warning quotes the redacted URL only. It is
+  logged on `rosout.ros_mongo`, the logger `rospy.logwarn(..., logger_name="ros_mongo")` uses, so
+  in any rospy node it reaches /rosout, the screen and the node's log file whichever package
+  loggers that node routes; outside ROS it goes to stderr.
 """
+import hashlib
+import logging
 import os
 import re
+import threading
 from pathlib import Path
-from typing import Mapping, Optional, Tuple
+from typing import Mapping, Optional, Set, Tuple
 from urllib.parse import quote, unquote
 
 from ros_mongo.errors import StoreError
 
 __all__ = ["redact_url", "with_credentials", "check_url", "scrub", "password_in_url",
-           "PASSWORD_ENV", "USER_ENV", "CredentialsError"]
+           "password_warning", "warn_password_in_url", "PASSWORD_ENV", "USER_ENV", "CredentialsError",
+           "NODE_CREDENTIALS_HINT"]
 
 PASSWORD_ENV = "ROS_MONGO_DB_PASSWORD"
 USER_ENV = "ROS_MONGO_DB_USER"
@@ -36,6 +48,14 @@ _MASK = "***"
 _SECRET_KEYS = ("pass", "pwd", "secret", "token", "key", "credential", "signature", "sig",
                 "authmechanismproperties", "session")
 _PUBLIC_KEYS = ("authsource", "authmechanism", "replicaset", "tlscafile", "tlscertificatekeyfile")
+
+#: Where a node takes the password instead of the URL.
+NODE_CREDENTIALS_HINT = (f"in a file named by the node's ~db_credentials_file parameter "
+                         f"(~central_credentials_file for ~central_url; one line 'user:password' or "
+                         f"'password') or in ${PASSWORD_ENV}")
+_WARNING_LOG = logging.getLogger("rosout.ros_mongo")
+_warned: Set[str] = set()  # sha256 of each URL warned about in this process
+_warned_lock = threading.Lock()
 
 
 class CredentialsError(StoreError):
@@ -111,6 +131,30 @@ def password_in_url(url: str) -> bool:
     return redact_url(url) != url
 
 
+def password_warning(url, *, hint: str = NODE_CREDENTIALS_HINT) -> Optional[str]:
+    """The warning for a `url` that carries a password, the first time this process sees that
+    URL (None otherwise). It quotes the redacted URL only."""
+    if not password_in_url(url):
+        return None
+    key = hashlib.sha256(url.encode("utf-8", "replace")).hexdigest()
+    with _warned_lock:
+        if key in _warned:
+            return None
+        _warned.add(key)
+    return (f"the database URL {redact_url(url)} carries a password, and roslaunch prints parameters "
+            f"when it starts (the first characters of every value, so of the password too), as do "
+            f"`rosparam get` and `ps` for command-line URLs: keep the URL password-free and put the "
+            f"password {hint}")
+
+
+def warn_password_in_url(url, *, hint: str = NODE_CREDENTIALS_HINT) -> bool:
+    """Log `password_warning(url)` as a WARNING (once per process and URL); True if it warned."""
+    text = password_warning(url, hint=hint)
+    if text is not None:
+        _WARNING_LOG.warning(text)
+    return text is not None
+
+
 def check_url(url) -> None:
     """StoreError (quoting the redacted URL only) unless `url` is a string with a scheme."""
     if not isinstance(url, str) or "://" not in url:
@@ -139,11 +183,14 @@ def read_credentials_file(path: str) -> Tuple[Optional[str], str]:
 
 
 def with_credentials(url: str, *, credentials_file: Optional[str] = None,
-                     environ: Optional[Mapping[str, str]] = None) -> str:
+                     environ: Optional[Mapping[str, str]] = None, warn: bool = True) -> str:
     """The URL to connect with: `url` plus the user and password from the credentials file or the
     environment (ROS_MONGO_DB_USER / ROS_MONGO_DB_PASSWORD), unless `url` has a password already.
-    The credentials file wins over the environment."""
+    The credentials file wins over the environment. A password in `url` itself is warned about
+    once (`warn_password_in_url`) unless `warn` is False (a URL this process completed itself)."""
     check_url(url)
+    if warn:
+        warn_password_in_url(url)
     environ = os.environ if environ is None else environ
     scheme, userinfo, location, tail = _split(url)
     if ":" in userinfo:
