@@ -15,7 +15,7 @@ from sensor_msgs.msg import Image, JointState, LaserScan
 from std_msgs.msg import Header
 
 from ros_harness import wait_until
-from ros_mongo import BagError, open_store, parse_query
+from ros_mongo import BagError, cli, open_store, parse_query
 from ros_mongo.bagio import export_bag, import_bag, iter_bag
 from ros_mongo.cli import parse_args, run
 
@@ -94,14 +94,17 @@ def run_cli(workspace_root, *args):
                           capture_output=True, text=True, timeout=120)
 
 
-def test_cli_round_trip_and_clear_errors(couchdb_url, tmp_path, workspace_root):
+def test_cli_round_trip_and_clear_errors(couchdb_url, tmp_path, workspace_root, capsys, monkeypatch):
     source = tmp_path / "source.bag"
     write_bag(source)
-    done = run_cli(workspace_root, "--db-url", couchdb_url, "import", source)
+    done = run_cli(workspace_root, "--db-url", couchdb_url, "import", source)  # the installed script
     assert done.returncode == 0, done.stderr
     assert "56 messages" in done.stdout
-    info = run_cli(workspace_root, "info", "--db-url", couchdb_url)
-    assert "/camera/rgb/image_raw" in info.stdout and "3 messages" in info.stdout
+    # the other commands through the same entry point, in this process (quicker than a process each)
+    monkeypatch.setattr(cli, "keep_freed_memory", lambda: True)  # no allocator tuning in pytest
+    assert cli.main(["--no-progress", "info", "--db-url", couchdb_url]) == 0
+    info = capsys.readouterr().out
+    assert "/camera/rgb/image_raw" in info and "3 messages" in info
     broken = tmp_path / "broken.bag"
     broken.write_bytes(b"#ROSBAG V2.0\n" + bytes(range(256)) * 4)
     cases = [
@@ -109,12 +112,14 @@ def test_cli_round_trip_and_clear_errors(couchdb_url, tmp_path, workspace_root):
         (("import", tmp_path / "missing.bag"), "ERROR: cannot read bag"),
         (("export", source), "ERROR: bag .* exists"),
         (("export", tmp_path / "x.bag", "--query", "colour red"), "ERROR: unknown query key"),
+        (("export", tmp_path / "x.bag", "--compression", "zstd"), "ERROR: bag compression must be one of"),
     ]
     for args, message in cases:
-        failed = run_cli(workspace_root, "--db-url", couchdb_url, *args)
-        lines = failed.stderr.strip().splitlines()
-        assert failed.returncode == 1 and len(lines) == 1, failed.stderr
+        status = cli.main(["--no-progress", "--db-url", couchdb_url, *map(str, args)])
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert status == 1 and len(lines) == 1, lines
         assert re.match(message, lines[0]), lines[0]
+    assert not (tmp_path / "x.bag").exists() and not (tmp_path / "x.bag.partial").exists()
 
 
 @pytest.mark.ros

@@ -90,13 +90,13 @@ def test_import_with_topics_then_whole_and_again_under_another_name_stores_once(
 
 def test_import_holds_a_bounded_number_of_bytes(db_url, tmp_path):
     bag = tmp_path / "clouds.bag"
-    size, count = 2 * 1024 * 1024, 16
+    size, count = 512 * 1024, 32  # above the blob threshold: attachments / GridFS
     with rosbag.Bag(str(bag), "w") as out:
         for i in range(count):
-            image = Image(height=1024, width=2048, encoding="mono8", step=2048,
+            image = Image(height=512, width=1024, encoding="mono8", step=1024,
                           data=bytes([i]) * size)
             out.write("/cloud", image, genpy.Time(T0 + i, 0))
-    batch_bytes = 4 * 1024 * 1024
+    batch_bytes = 1024 * 1024
     with open_store(db_url) as store:
         result = import_bag(bag, store, batch_bytes=batch_bytes, progress=False)
         assert result.messages == count and store.count() == count
