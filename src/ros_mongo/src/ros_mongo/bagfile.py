@@ -12,8 +12,6 @@ nothing twice).
 from pathlib import Path
 from typing import Dict, Iterator, Optional, Sequence, Tuple
 
-import genpy
-
 from ros_mongo.errors import BagError
 from ros_mongo.formats import (
     FileFormat,
@@ -25,7 +23,7 @@ from ros_mongo.formats import (
     register_format,
 )
 
-__all__ = ["BagReader", "BagWriter", "iter_bag", "BAG_MAGIC"]
+__all__ = ["BagReader", "BagWriter", "BAG_MAGIC"]
 
 BAG_MAGIC = b"#ROSBAG V"
 
@@ -38,27 +36,17 @@ def _text(header: Dict, key: str) -> str:
 class BagReader(FileReader):
     """Messages of a ROS 1 bag, indexed or not (see the module docstring)."""
 
-    def __init__(self, path, *, progress: bool = False):
-        super().__init__(path)
-        self.progress = progress
-        self.bag = None
-
     def open(self) -> "BagReader":
         import rosbag
 
         try:
-            self.bag = rosbag.Bag(str(self.path), "r")
+            self.handle = self.bag = rosbag.Bag(str(self.path), "r")
         except rosbag.ROSBagUnindexedException:
             self._open_unindexed()
         except (rosbag.ROSBagException, OSError, ValueError) as err:
             raise BagError(f"cannot read bag {self.path}: {err}") from None
         self.fingerprint = self._fingerprint()
         return self
-
-    def close(self) -> None:
-        if self.bag is not None:
-            self.bag.close()
-            self.bag = None
 
     def count(self, topics: Optional[Sequence[str]] = None) -> int:
         return self.bag.get_message_count(topic_filters=list(topics) if topics else None)
@@ -93,7 +81,7 @@ class BagReader(FileReader):
             bag = rosbag.Bag(str(self.path), "r", allow_unindexed=True)
         except (rosbag.ROSBagException, OSError, ValueError) as err:
             raise BagError(f"cannot read bag {self.path}: {err}") from None
-        self.bag = bag
+        self.handle = self.bag = bag
         if bag.version != 200:
             raise BagError(f"cannot read bag {self.path}: it has no index and is of version {bag.version}; "
                            f"run `rosbag reindex` on it first")
@@ -175,13 +163,6 @@ class BagWriter(FileWriter):
                        t=stored.receive_stamp, raw=True, connection_header=header)
         if self.switch and info.key not in self.by_info:
             self.by_info[info.key] = self.bag._topic_connections[stored.topic]
-
-
-def iter_bag(path) -> Iterator[Tuple[str, bytes, genpy.Time, Dict[str, str]]]:
-    """(topic, raw bytes, bag time, connection header) of every message (for checks and tests)."""
-    with BagReader(path) as reader:
-        for message in reader.messages():
-            yield message.topic, bytes(message.data), message.stamp, message.header
 
 
 register_format(FileFormat("bag", BagReader, BagWriter, (".bag", ".active"), BAG_MAGIC,

@@ -38,15 +38,14 @@ import genpy
 
 from ros_mongo import bagfile, mcapio  # noqa: F401 - they register the bag and MCAP formats
 from ros_mongo.backends.base import PreparedRecords
-from ros_mongo.bagfile import iter_bag
 from ros_mongo.errors import BagError, StoreError, UnknownTypeError
-from ros_mongo.formats import Recovery, format_for_path, format_of_file
+from ros_mongo.formats import Recovery, format_for_path, format_of_file, iter_file
 from ros_mongo.query import Query
 from ros_mongo.records import MessageRecord, TopicInfo, make_record, new_message_id
 from ros_mongo.store import MessageStore
 
-__all__ = ["import_file", "export_file", "import_bag", "export_bag", "iter_bag", "TransferResult",
-           "BATCH_BYTES", "BATCH_SIZE"]
+__all__ = ["import_file", "export_file", "iter_file", "import_bag", "export_bag", "iter_bag",
+           "TransferResult", "BATCH_BYTES", "BATCH_SIZE"]
 
 #: Import batches close at this many bytes of serialized messages ...
 BATCH_BYTES = 16 * 1024 * 1024
@@ -254,3 +253,4 @@ class _InfoIndex:
 #: The names the bag-only versions had.
 import_bag = import_file
 export_bag = export_file
+iter_bag = iter_file

@@ -22,7 +22,7 @@ import genpy
 from ros_mongo.errors import BagError
 
 __all__ = ["RawMessage", "Recovery", "FileFormat", "FileWriter", "register_format", "format_named",
-           "format_of_file", "format_for_path", "format_names", "FileReader", "fingerprint_of"]
+           "format_of_file", "format_for_path", "format_names", "FileReader", "fingerprint_of", "iter_file"]
 
 PathLike = Union[str, Path]
 
@@ -173,10 +173,13 @@ class FileWriter:
 
 class FileReader:
     """Base of the format readers: `open()` / `close()` and a context manager; after `open()`,
-    `fingerprint`, `count(topics)`, `messages(topics)` and `recovery` (None for an intact file)."""
+    `fingerprint`, `count(topics)`, `messages(topics)` and `recovery` (None for an intact file).
+    `handle` is what `open()` opened and `close()` closes."""
 
-    def __init__(self, path: PathLike):
+    def __init__(self, path: PathLike, *, progress: bool = False):
         self.path = Path(path)
+        self.progress = progress
+        self.handle = None
         self.fingerprint = ""
         self.recovery: Optional[Recovery] = None
 
@@ -184,7 +187,9 @@ class FileReader:
         raise NotImplementedError
 
     def close(self) -> None:
-        raise NotImplementedError
+        if self.handle is not None:
+            self.handle.close()
+            self.handle = None
 
     def count(self, topics: Optional[Sequence[str]] = None) -> int:
         raise NotImplementedError
@@ -193,10 +198,22 @@ class FileReader:
         raise NotImplementedError
 
     def __enter__(self) -> "FileReader":
-        return self.open()
+        try:
+            return self.open()
+        except BaseException:
+            self.close()  # what open() had opened before it failed
+            raise
 
     def __exit__(self, *_exc) -> None:
         self.close()
+
+
+def iter_file(path: PathLike) -> Iterator[Tuple[str, bytes, genpy.Time, Dict[str, str]]]:
+    """(topic, raw bytes, log time, ROS 1 connection header) of every message of a bag or MCAP
+    file, in the reader's order (for checks and tests)."""
+    with format_of_file(path).reader(path) as reader:
+        for message in reader.messages():
+            yield message.topic, bytes(message.data), message.stamp, message.header
 
 
 def fingerprint_of(start: float, end: float, count: int,

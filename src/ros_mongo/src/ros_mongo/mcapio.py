@@ -32,7 +32,7 @@ from ros_mongo.formats import (
 )
 from ros_mongo.msgtypes import message_class
 
-__all__ = ["McapReader", "McapWriter", "iter_mcap", "MCAP_MAGIC"]
+__all__ = ["McapReader", "McapWriter", "MCAP_MAGIC"]
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 PROFILE = "ros1"
@@ -63,8 +63,7 @@ class McapReader(FileReader):
     """Messages of an MCAP file with ROS 1 channels (see the module docstring)."""
 
     def __init__(self, path, *, progress: bool = False):
-        super().__init__(path)
-        self.progress = progress
+        super().__init__(path, progress=progress)
         self.stream = None
         self.headers: Dict[int, Dict[str, str]] = {}     # channel id -> ROS 1 connection header
         self.classes: Dict[int, Optional[type]] = {}
@@ -77,7 +76,7 @@ class McapReader(FileReader):
     def open(self) -> "McapReader":
         mcap = _mcap()
         try:
-            self.stream = open(self.path, "rb")
+            self.handle = self.stream = open(self.path, "rb")
             reader = mcap.reader.make_reader(self.stream)
         except (OSError, mcap.exceptions.McapError) as err:
             self.close()
@@ -100,11 +99,6 @@ class McapReader(FileReader):
         start, end = (_stamp(span[0]).to_sec(), _stamp(span[1]).to_sec()) if count else (0.0, 0.0)
         self.fingerprint = fingerprint_of(start, end, count, connections)
         return self
-
-    def close(self) -> None:
-        if self.stream is not None:
-            self.stream.close()
-            self.stream = None
 
     def count(self, topics: Optional[Sequence[str]] = None) -> int:
         self._check_channels(topics)
@@ -265,13 +259,6 @@ class McapWriter(FileWriter):
             info.topic, MESSAGE_ENCODING, schema_id, metadata)
         self.sequence[channel_id] = 0
         return channel_id
-
-
-def iter_mcap(path) -> Iterator[Tuple[str, bytes, genpy.Time, Dict[str, str]]]:
-    """(topic, raw bytes, log time, ROS 1 connection header) of every message (checks, tests)."""
-    with McapReader(path) as reader:
-        for message in reader.messages():
-            yield message.topic, bytes(message.data), message.stamp, message.header
 
 
 register_format(FileFormat("mcap", McapReader, McapWriter, (".mcap",), MCAP_MAGIC,
