@@ -163,11 +163,11 @@ def _start_xvfb(log_dir: Path):
         xvfb = ManagedProcess(["Xvfb", f":{number}", "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
                               name="Xvfb", log_path=log_dir / f"xvfb_{number}.log").start()
         try:
-            wait_until(lambda: Path(f"/tmp/.X11-unix/X{number}").exists() or not xvfb.alive(),
+            wait_until(lambda: Path(f"/tmp/.X11-unix/X{number}").exists() or not xvfb.alive,
                        START_TIMEOUT, what="Xvfb socket", check=None)
         except TimeoutError:
             xvfb.stop(timeout=5)
             raise
-        if xvfb.alive():
+        if xvfb.alive:
             return xvfb, number
     raise HarnessError("no free X display number between :99 and :199")

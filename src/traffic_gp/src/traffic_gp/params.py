@@ -1,6 +1,6 @@
 """The crowd-model node's parameters (`traffic_server`, node name `traffic_gp`); no ROS here.
 
-`ServerConfig` is the one place their defaults and descriptions are written: the node reads it
+`TrafficServerParams` is the one place their defaults and descriptions are written: the node reads it
 with `robot_common.ros_node.read_config`, and config/traffic_gp.yaml is generated from it
 (`python -m robot_common.config_files --write`). `utc_offset_hours` also accepts "" and "local"
 (the machine's local zone, like None) and a number written as a string.
@@ -12,13 +12,13 @@ from robot_common.errors import ConfigError
 from robot_common.params import param
 from ros_mongo.changes import CentralSourceParams
 
-__all__ = ["ServerConfig", "LOCAL_ZONE"]
+__all__ = ["TrafficServerParams", "LOCAL_ZONE"]
 
 LOCAL_ZONE = ("", "local")     # utc_offset_hours values that mean the machine's local zone
 
 
 @dataclass
-class ServerConfig(CentralSourceParams):
+class TrafficServerParams(CentralSourceParams):
     """Parameters of the crowd-model server (see `ros_traffic.TrafficServer`)."""
 
     map_yaml: str = param("", "map_server .yaml of the map; empty: the map from the `map` topic")
@@ -33,7 +33,8 @@ class ServerConfig(CentralSourceParams):
     dwell_time: float = param(20.0, "s; counts over a watch of d seconds: exposure x "
                                     "(1 + d / dwell_time)")
     min_rows: int = param(2000, "observation rows before the first fit")
-    initial_steps: int = param(600, "training steps of the first fit")
+    initial_steps: int = param(600, "maximum training steps of the first fit (after its "
+                                    "choice of settings on the most recent days)")
     train_period: float = param(2.0, "s between training rounds")
     chunk_steps: int = param(20, "training steps per lock hold (services wait at most one chunk)")
     publish_period: float = param(5.0, "s between cost map publications")
@@ -46,8 +47,10 @@ class ServerConfig(CentralSourceParams):
                                         "resizes to it)")
     frame_id: str = param("map", "frame of the published cost maps")
     model: dict = param({}, "TrafficGP keyword arguments (empty: TrafficGP's defaults)")
+
     @classmethod
-    def from_mapping(cls, params: Optional[Mapping[str, Any]] = None, **kwargs) -> "ServerConfig":
+    def from_mapping(cls, params: Optional[Mapping[str, Any]] = None,
+                     **kwargs) -> "TrafficServerParams":
         """As `NodeConfig.from_mapping`; utc_offset_hours "" / "local" mean None (local zone)."""
         params = dict(params or {})
         offset = params.get("utc_offset_hours")
