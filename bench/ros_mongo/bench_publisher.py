@@ -1,4 +1,3 @@
-#!/usr/bin/env python3
 """Benchmark publishers for ros_mongo: 1 kHz nav_msgs/Odometry, 30 Hz 640x480 rgb8 sensor_msgs/Image
 and 40 Hz 1081-beam sensor_msgs/LaserScan at the same time, each on its own thread with an absolute
 schedule.
@@ -6,14 +5,13 @@ schedule.
 Messages are serialized once; each one sent gets its own header.seq (the message's index) and
 stamp patched into the bytes, so every message is distinct and a receiver can tell which ones it
 missed. robot_sim's sensor_sim renders its data in Python and cannot hold these rates.
-Prints one JSON line with the number of messages published per topic. Used by
-bench/ros_mongo_bench.py; by hand: rosrun ros_mongo ros_mongo_bench_publisher --duration 10
+Prints one JSON line with the number of messages published per topic. bench/ros_mongo/
+ros_mongo_bench.py runs it as a process of its own (`ros_mongo_bench.py --publish SECONDS`); by
+hand, under a roscore: python bench/ros_mongo/ros_mongo_bench.py --publish 10
 """
-import argparse
 import json
 import math
 import struct
-import sys
 import threading
 import time
 from io import BytesIO
@@ -64,12 +62,9 @@ def run_topic(topic, msg, publisher, rate, duration, start, counts):
         counts[topic] = index + 1
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--duration", type=float, default=20.0)
-    parser.add_argument("--wait-subscribers", type=int, default=1,
-                        help="start once every topic has this many subscribers")
-    args = parser.parse_args(rospy.myargv(argv if argv is not None else sys.argv)[1:])
+def publish(duration: float, wait_subscribers: int = 1) -> int:
+    """Publish the standard load for `duration` s once every topic has `wait_subscribers`
+    subscribers; print the counts as one JSON line."""
     rospy.init_node("ros_mongo_bench_publisher", disable_signals=True)
     messages = samples()
     counts = {topic: 0 for topic in TOPICS}
@@ -77,11 +72,11 @@ def main(argv=None):
                   for t, m in messages.items()}
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and \
-            min(p.get_num_connections() for p in publishers.values()) < args.wait_subscribers:
+            min(p.get_num_connections() for p in publishers.values()) < wait_subscribers:
         time.sleep(0.05)  # polling the condition "all subscribers connected"
     start = time.monotonic() + 0.5
     threads = [threading.Thread(target=run_topic, args=(t, messages[t], publishers[t], TOPICS[t],
-                                                         args.duration, start, counts)) for t in TOPICS]
+                                                         duration, start, counts)) for t in TOPICS]
     for thread in threads:
         thread.start()
     for thread in threads:
@@ -91,7 +86,3 @@ def main(argv=None):
     print(json.dumps({"published": counts, "seconds": elapsed}), flush=True)
     rospy.signal_shutdown("done")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

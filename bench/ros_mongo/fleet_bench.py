@@ -1,12 +1,13 @@
 #!/usr/bin/env python3
-"""Fleet benchmark: three robots record locally and replicate to one central CouchDB-API server.
+"""Fleet benchmark: three robots, each through launch/fleet.launch, to one central CouchDB-API server.
 
-Each robot (its own roscore, local pouchdb-server and launch/fleet.launch) gets 100 Hz
+Each robot (its own roscore; with a local pouchdb-server in the replicated run) gets 100 Hz
 nav_msgs/Odometry, 10 Hz 1081-beam sensor_msgs/LaserScan and 5 Hz 640x480 rgb8 sensor_msgs/Image
 (921 KB: an attachment) from a publisher of this script (`--publish`, a real ROS node). Run 1
 (replicated): `--duration` s of steady state, then the central server is stopped for `--partition`
-s while the robots keep recording, then restarted; `--tail` s more. Run 2 (direct, the peer): the
-same robots' recorders write straight to the central server for `--duration` s.
+s while the robots keep recording, then restarted; `--tail` s more (fleet.launch local_db:=true).
+Run 2 (direct: fleet.launch's default): the same robots' recorders write straight to the central
+server for `--duration` s.
 
 Figures: messages lost (published - central), central throughput (messages/s and MB/s stored
 centrally), lag = time a message is stored centrally (the central `update_seq` has reached its
@@ -17,11 +18,11 @@ messages received there), catch-up time = from the central restart until every m
 before it is central (faster than real time when below `--partition`), and the direct run's
 figures with ratios, and the CPU each kind of process used in the steady state of both runs
 (cores: robot stores, recorders and replicators, publishers, the central store, the whole
-machine). Targets (issue 13): 0 lost, steady-state lag p99 < 5 s, catch-up <
+machine). Targets: 0 lost, steady-state lag p99 < 5 s, catch-up <
 partition. Printed, written to artifacts/bench/fleet.json, plot artifacts/bench/fleet_lag.png.
 
-    scripts/in_env.sh python bench/fleet_bench.py                 # 60 s + 60 s partition
-    scripts/in_env.sh python bench/fleet_bench.py --quick         # 10 s + 10 s, a smoke run
+    scripts/in_env.sh python bench/ros_mongo/fleet_bench.py          # 60 s + 60 s partition
+    scripts/in_env.sh python bench/ros_mongo/fleet_bench.py --quick  # 10 s + 10 s, a smoke run
 """
 import argparse
 import bisect
@@ -45,7 +46,7 @@ from ros_harness import LaunchSet, ManagedProcess, PouchDBServer, RosCore, wait_
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ros_mongo_bench_lib import CpuWatch  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 RATES = {"/odom": 100.0, "/scan": 10.0, "/camera/rgb/image_raw": 5.0}
 TOPICS = "[/odom, /scan, /camera/rgb/image_raw]"
 #: Steady-state lag counts messages received from 5 s after the start until CUT_GUARD s before the
@@ -240,15 +241,16 @@ class Robot:
         self.store = PouchDBServer(self.work / "store").start()
         self.url = self.store.database_url("robot_data")
         self.nodes = self.launches(str(ROOT / "launch" / "fleet.launch"), central_url=central_url,
-                      robot_id=self.robot_id, local_db="false", local_db_port=self.store.port,
+                      robot_id=self.robot_id, local_db="true", local_db_server="false",
+                      local_db_port=self.store.port,
                       topics=TOPICS, local_topics=_yaml_list(self.local_topics),
                       spool_path=str(self.work / "spool"))
 
     def start_direct(self, central_db_url):
         topics = [t for t in RATES if t not in self.local_topics]  # what central gets either way
-        self.nodes = self.launches("ros_mongo", "ros_mongo_server.launch", db_url=central_db_url,
-                      robot_id=self.robot_id, topics=_yaml_list(topics),
-                      spool_path=str(self.work / "spool_direct"))
+        self.nodes = self.launches(str(ROOT / "launch" / "fleet.launch"), central_url=central_db_url,
+                                   robot_id=self.robot_id, topics=_yaml_list(topics),
+                                   spool_path=str(self.work / "spool_direct"))
 
     def publish(self, duration, topics=()):
         """Start the publisher: `topics` (default all) for `duration` s."""

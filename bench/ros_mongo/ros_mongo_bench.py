@@ -1,433 +1,199 @@
 #!/usr/bin/env python3
-"""ros_mongo benchmark, in one run on this machine (`python bench/ros_mongo_bench.py [--quick]`):
+"""ros_mongo benchmark, everything in one run on this machine:
 
-1. record: ros_mongo_server against `rosbag record`, both subscribed to the same publishers at the
-   same time (1 kHz Odometry, 30 Hz 640x480 rgb8 Image, 40 Hz 1081-beam LaserScan): messages stored
-   per second, drops (published - stored), ratio to rosbag; per database backend. CPU seconds
-   (user+system, from /proc, sampled every 0.1 s until each process exits) of the recorder, of the
-   database server it writes to and of rosbag record's `record` process, from the start of
-   publishing: totals, per MB published, as multiples of rosbag record's (targets: recorder +
-   server <= 3x, recorder <= 1.5x); peak RSS (VmHWM) of each. `--only-record` runs just this stage.
-2. import: that bag into each database (ros_mongo_bag's import) against the same server's raw
-   bulk-insert rate for the same payloads (msgs/s, MB/s, ratio; target >= 0.9). `--bag FILE
-   --only-import` runs just this stage on a bag kept by an earlier run (`--keep`).
-3. replay: ros_mongo_retriever against `rosbag play` of the same data: p50/p99 of the inter-message
-   gap error |received gap - recorded gap| per message pair (target: no worse than rosbag play).
-   `--bag FILE --only-replay` imports the bag into the first backend and runs just this stage.
-4. fault run (CouchDB through ros_harness.fault_proxy, a real proxy process in front of the real
-   server): the same load while the proxy answers 30 s of 401 (wrong password), then 30 s of 500
-   timeout, then recovers: messages lost (target 0), seconds from recovery until the spool is
-   drained, peak memory (VmHWM) of the recorder. `--only-fault` runs just this stage
-   (`--fault-seconds` sets each fault's length; quick: 5 s).
+    scripts/in_env.sh python bench/ros_mongo/ros_mongo_bench.py          # about 25 min
+    scripts/in_env.sh python bench/ros_mongo/ros_mongo_bench.py --quick  # a 5 min smoke run
 
-Figures are printed, written to artifacts/bench/ros_mongo.json, plots to artifacts/bench/ros_mongo_*.png.
+The standard load (bench_publisher.py): 1 kHz nav_msgs/Odometry, 30 Hz 640x480 rgb8 Image, 40 Hz
+1081-beam LaserScan, `--duration` s (20).
+1. fault runs (launch/fleet.launch's default recorder, ros_harness.fault_proxy between it and
+   central): `--fault-seconds` (30) of 401 then of 500 timeout, default spool: lost (target 0);
+   then a full spool: 2 x `--fault-seconds` of central unreachable into a `--spool-mb` (200)
+   spool: lost per topic against dropped per topic on /diagnostics (target: images only, each
+   loss counted).
+2. record (record_configs.py): each configuration beside `rosbag record` of the same topics at the
+   same time: recorder to a database on another machine (CouchDB, MongoDB), the fleet default,
+   the fleet with a local store + replication. Stored per s (x rosbag), drops, robot-side CPU
+   seconds from /proc (x rosbag record's `record` process; target fleet default <= 1.3x), peak RSS.
+3. import: the recorded bag into each database against the same server's raw bulk-insert rate of
+   the same payloads (target >= 0.9).
+4. replay: ros_mongo_retriever against rosbag play of the same data, `--replay-repeats` (6)
+   alternating pairs: gap error |received gap - recorded gap| p50/p99 pooled, per run, and the
+   spread of the pairs' p99 ratios (target: pooled p99 <= 1.0x rosbag play's).
+
+`--only-fault`, `--only-record`, `--bag FILE --only-import`, `--bag FILE --only-replay` run one stage
+(`--keep` keeps the bags). Figures are printed and written to artifacts/bench/ros_mongo.json, the
+plot to artifacts/bench/ros_mongo_bench.png.
 """
 import argparse
 import json
 import os
 import shutil
-import signal
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 import yaml
 
-ROOT = Path(__file__).resolve().parent.parent
-PUBLISHER = ROOT / "src" / "ros_mongo" / "scripts" / "ros_mongo_bench_publisher"
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+sys.path.insert(0, str(HERE))
 
-from ros_mongo_bench_lib import (  # noqa: E402 - after the path set-up
-    BACKENDS,
-    TOPICS,
-    Arrivals,
-    CpuWatch,
-    RecorderWatch,
-    bag_counts,
-    gap_errors,
-    peak_rss_mb,
-    plot_results,
-    raw_bulk_rate,
-    recorded_times,
-    start_servers,
-    subscribers_ready,
-)
+from ros_mongo_bench_lib import BACKENDS, plot_results, start_servers  # noqa: E402 - after the path set-up
 
-from ros_harness import FaultProxy, ManagedProcess, RosCore, RosLaunch, wait_until  # noqa: E402
-from ros_mongo import open_store  # noqa: E402
-from ros_mongo.bagio import import_bag  # noqa: E402
+from ros_harness import RosCore  # noqa: E402
 
 
 def say(text=""):
     print(text, flush=True)
 
 
-def bench_record(core, server, work, duration, backend):
-    """The recorder and rosbag record on the same publishers at the same time, with the CPU
-    seconds and peak memory of the recorder, of the database server it writes to and of rosbag
-    record (see `_cpu_figures`)."""
-    url = server.database_url("bench")
-    bag = work / f"record_{backend}.bag"
-    logs = work / "logs"
-    recorder = RosLaunch.node("ros_mongo", "ros_mongo_server", master_uri=core.uri, log_dir=logs,
-                              env=core.env(), params={
-                                  "db_url": url, "topics": list(TOPICS), "session_id": f"bench_{backend}",
-                                  "spool_path": str(work / f"{backend}.spool"), "diagnostics_period": 0.5,
-                                  "shutdown_timeout": 120.0}).start()
-    rosbag = ManagedProcess(["rosbag", "record", "-O", str(bag), *TOPICS], name="rosbag record",
-                            log_path=logs / f"rosbag_record_{backend}.log", env=core.env()).start()
-    watch = RecorderWatch()
-    wait_until(lambda: subscribers_ready(core.uri, TOPICS, 2), 60, what="recorder and rosbag subscribed")
-    cpu = CpuWatch()
-    cpu.add("recorder", recorder.node_pid("/ros_mongo_server"))
-    cpu.add("store", server.process.pid)
-    cpu.add("rosbag", rosbag.pid)
-    cpu.mark("start")
-    publisher = subprocess.run([sys.executable, str(PUBLISHER),
-                                "--duration", str(duration), "--wait-subscribers", "2"],
-                               capture_output=True, text=True, env=core.env(), timeout=duration + 120)
-    if publisher.returncode != 0:
-        raise RuntimeError(f"publisher failed: {publisher.stderr[-2000:]}")
-    published = json.loads(publisher.stdout.strip().splitlines()[-1])
-    at_end = dict(watch.values)
-    ended = time.monotonic()
-    total = sum(published["published"].values())
-    wait_until(lambda: watch.count("stored") + watch.count("dropped") >= watch.count("received") > 0
-               and watch.count("spool_pending") == 0 and watch.count("queued") == 0
-               and watch.count("received") >= total * 0.5, 600, what="recorder caught up")
-    drain = time.monotonic() - ended
-    recorder.stop(timeout=150)
-    os.killpg(rosbag.pid, signal.SIGINT)  # the wrapper and its `record` child: the bag gets its index
-    wait_until(lambda: bag.exists() and not Path(str(bag) + ".active").exists(), 120, interval=0.2,
-               what="rosbag record to close the bag")
-    rosbag.stop(timeout=10)
-    watch.close()
-    cpu.close()
-    with open_store(url) as store:
-        stored = {t: store.count_messages(topic=t, session_id=f"bench_{backend}") for t in TOPICS}
-    in_bag = bag_counts(bag)
-    seconds = published["seconds"]
-    result = {"published": published["published"], "seconds": seconds,
-              "recorder": _rates(stored, published["published"], seconds),
-              "rosbag": _rates(in_bag, published["published"], seconds),
-              "recorder_stored_while_publishing": watch.count_at(at_end, "stored"),
-              "recorder_drain_seconds_after_publishing": drain, "bag": str(bag),
-              "timeline": watch.timeline}
-    rosbag_rate = max(result["rosbag"]["stored_per_s"], 1e-9)
-    result["ratio_stored_per_s"] = result["recorder"]["stored_per_s"] / rosbag_rate
-    # what reached the database while publishing, and the rate until everything was stored
-    result["recorder_realtime_per_s"] = result["recorder_stored_while_publishing"] / seconds
-    result["recorder_sustained_per_s"] = result["recorder"]["stored_total"] / (seconds + drain)
-    result["ratio_sustained"] = result["recorder_sustained_per_s"] / rosbag_rate
-    result["megabytes"] = bag.stat().st_size / 1e6
-    result["recorder_spooled"] = watch.count_at(watch.values, "spooled")
-    result["cpu"] = _cpu_figures(cpu, result["megabytes"])
-    return result
-
-
-def _cpu_figures(cpu, megabytes):
-    """CPU seconds (user + system) from the start of publishing until each process exited (the
-    recorder, rosbag) or the recorder exited (the database server, which stays up), total and per
-    MB published, as a multiple of rosbag record's `record` process; peak RSS of each."""
-    seconds = {"recorder": cpu.cpu("recorder", "start"), "store": cpu.cpu("store", "start"),
-               "rosbag_record": cpu.cpu("rosbag", "start", command="record"),
-               "rosbag_all": cpu.cpu("rosbag", "start")}
-    seconds["recorder_and_store"] = seconds["recorder"] + seconds["store"]
-    rosbag = max(seconds["rosbag_record"], 1e-9)
-    return {"seconds": seconds, "per_mb": {k: v / megabytes for k, v in seconds.items()},
-            "x_rosbag_record": {k: v / rosbag for k, v in seconds.items()},
-            "peak_rss_mb": {"recorder": cpu.peak_rss_mb("recorder"), "store": cpu.peak_rss_mb("store"),
-                            "rosbag_record": cpu.peak_rss_mb("rosbag", command="record")}}
-
-
-def bench_fault(core, server, work, fault_seconds, settle=5.0):
-    """The recording load through the fault proxy: `fault_seconds` of 401, then of 500 timeout."""
-    logs = work / "logs"
-    proxy = FaultProxy(server.url, logs).start()
-    url = proxy.database_url("bench_fault")
-    name = "fault_recorder"
-    recorder = RosLaunch.node("ros_mongo", "ros_mongo_server", name=name, master_uri=core.uri, log_dir=logs,
-                              env=core.env(), params={
-                                  "db_url": url, "topics": list(TOPICS), "session_id": "bench_fault",
-                                  "spool_path": str(work / "fault.spool"), "diagnostics_period": 0.5,
-                                  "shutdown_timeout": 120.0}).start()
-    watch = RecorderWatch()
-    try:
-        wait_until(lambda: subscribers_ready(core.uri, TOPICS, 1), 60, what="recorder subscribed")
-        pid = recorder.node_pid(f"/{name}")
-        duration = settle + 2 * fault_seconds + settle
-        publisher = subprocess.Popen([sys.executable, str(PUBLISHER), "--duration", str(duration),
-                                      "--wait-subscribers", "1"], stdout=subprocess.PIPE, text=True,
-                                     env=core.env())
-        schedule = [(settle, {"auth": "wrong_password"}, "401 wrong password"),
-                    (settle + fault_seconds, {"timeout": "writes"}, "500 timeout"),
-                    (settle + 2 * fault_seconds, {}, "recovered")]
-        started, peak_pending, recovered_at = time.monotonic(), 0, None
-        for at, faults, what in schedule:
-            while time.monotonic() - started < at:
-                peak_pending = max(peak_pending, watch.count("spool_pending"))
-                time.sleep(0.2)
-            proxy.set(**faults)
-            say(f"  t={time.monotonic() - started:5.1f} s: {what} (stored {watch.count('stored')}, "
-                f"spool_pending {watch.count('spool_pending')})")
-            recovered_at = time.monotonic()
-        out, _ = publisher.communicate(timeout=duration + 300)
-        published = json.loads(out.strip().splitlines()[-1])
-        total = sum(published["published"].values())
-        wait_until(lambda: watch.count("received") >= total * 0.5 and watch.count("spool_pending") == 0
-                   and watch.count("queued") == 0
-                   and watch.count("stored") + watch.count("dropped") + watch.count("rejected")
-                   >= watch.count("received"), 900, interval=0.2, what="the spool drained")
-        drained = time.monotonic() - recovered_at
-        peak_mb = peak_rss_mb(pid)
-        final = dict(watch.values)
-        answered = proxy.state()["answered"]
-    finally:
-        recorder.stop(timeout=150)
-        watch.close()
-        proxy.stop()
-    with open_store(server.database_url("bench_fault")) as store:
-        stored = {t: store.count_messages(topic=t, session_id="bench_fault") for t in TOPICS}
-    return {"fault_seconds": fault_seconds, "published": published["published"],
-            "stored": stored, "lost": {t: published["published"][t] - stored[t] for t in TOPICS},
-            "lost_total": sum(published["published"][t] - stored[t] for t in TOPICS),
-            "drain_seconds_after_recovery": drained, "peak_rss_mb": peak_mb,
-            "peak_spool_pending": peak_pending,
-            "counts": {k: final.get(k) for k in ("received", "stored", "dropped", "rejected", "quarantined",
-                                                 "spooled", "writer_restarts")},
-            "answered_by_proxy": answered}
-
-
-def _rates(stored, published, seconds):
-    return {"stored": stored, "stored_total": sum(stored.values()),
-            "stored_per_s": sum(stored.values()) / seconds,
-            "drops": {t: published[t] - stored.get(t, 0) for t in published},
-            "drops_total": sum(published[t] - stored.get(t, 0) for t in published)}
-
-
-def bench_import(bag, urls, raw_rate=True):
-    """The bag imported into each database and, unless not `raw_rate`, the same server's raw
-    bulk-insert rate for the same payloads, measured on fresh databases just before and just
-    after the import and averaged (seconds per message): a server still compacting what the
-    previous stages wrote is slower for whichever comes first."""
-    if raw_rate:  # the import as the ros_mongo_bag command line runs it (not for --only-replay, so
-        # the replay's measuring subscriber is the same in runs of versions with and without it)
-        try:
-            from ros_mongo.allocator import keep_freed_memory
-            keep_freed_memory()
-        except ImportError:  # a ros_mongo without it (comparing with an earlier version)
-            pass
-    results = {}
-    for backend, url in urls.items():
-        raw_before = raw_bulk_rate(bag, url + "_raw_before") if raw_rate else None
-        with open_store(url + "_import") as store:
-            imported = import_bag(bag, store, session_id="import", progress=True)
-        if not raw_rate:
-            results[backend] = {"import_msgs_per_s": imported.rate, "messages": imported.messages,
-                                "import_mb_per_s": imported.megabytes_per_second,
-                                "megabytes": imported.bytes / 1e6}
-            continue
-        raw_after = raw_bulk_rate(bag, url + "_raw_after")
-        seconds = (raw_before["seconds"] + raw_after["seconds"]) / 2
-        raw = {"msgs_per_s": raw_before["msgs_per_s"] * raw_before["seconds"] / seconds,
-               "mb_per_s": raw_before["mb_per_s"] * raw_before["seconds"] / seconds}
-        results[backend] = {"raw_before_msgs_per_s": raw_before["msgs_per_s"],
-                            "raw_after_msgs_per_s": raw_after["msgs_per_s"],
-                            "import_msgs_per_s": imported.rate,
-                            "import_mb_per_s": imported.megabytes_per_second,
-                            "messages": imported.messages, "megabytes": imported.bytes / 1e6,
-                            "raw_msgs_per_s": raw["msgs_per_s"], "raw_mb_per_s": raw["mb_per_s"],
-                            "ratio_msgs": imported.rate / raw["msgs_per_s"],
-                            "ratio_mb": imported.megabytes_per_second / raw["mb_per_s"]}
-    return results
-
-
-def bench_replay(core, bag, url, work, extra, repeats):
-    """The same data through rosbag play and through ros_mongo_retriever, alternately `repeats`
-    times; gap errors per topic pooled over the runs, and the median of the runs' p99."""
-    recorded = recorded_times(bag)
-    runs = {"rosbag_play": [], "ros_mongo_retriever": []}
-    for run in range(repeats):
-        say(f"  replay run {run + 1}/{repeats}")
-        runs["rosbag_play"].append(_play_rosbag(core, bag, work))
-        runs["ros_mongo_retriever"].append(_play_retriever(core, url, work, extra, recorded))
-    results = {}
-    for who, arrivals in runs.items():
-        results[who] = gap_errors(arrivals, recorded)
-        results[who]["p99_ms_per_run"] = [gap_errors(a, recorded)["all"]["p99_ms"] for a in arrivals]
-    return results
-
-
-def _play_rosbag(core, bag, work):
-    arrivals = Arrivals({f"/play{t}": t for t in TOPICS})
-    player = ManagedProcess(["rosbag", "play", "--quiet", "--wait-for-subscribers", "--prefix", "/play",
-                             str(bag)], name="rosbag play", log_path=work / "logs" / "rosbag_play.log",
-                            env=core.env()).start()
-    wait_until(lambda: not player.alive, 600, interval=0.2, what="rosbag play to finish")
-    arrivals.close()
-    return arrivals.times
-
-
-def _play_retriever(core, url, work, extra, recorded):
-    arrivals = Arrivals({f"{t}_mongo": t for t in TOPICS})
-    params = {"db_url": url + "_import", "query": "session_id import", "start_delay": 2.0, "autostart": True}
-    retriever = RosLaunch.node("ros_mongo", "ros_mongo_retriever", master_uri=core.uri, log_dir=work / "logs",
-                               env=core.env(), params={**params, **extra}).start()
-    expected = sum(len(v) for v in recorded.values())
-    wait_until(lambda: arrivals.total() >= expected, 600, interval=0.2, what="retriever replay",
-               check=retriever.process.check_alive)
-    retriever.stop()
-    arrivals.close()
-    return arrivals.times
-
-
 def report(results):
     say("\n== ros_mongo benchmark ==")
-    for backend, rec in results.get("record", {}).items():
-        say(f"record ({backend}, {rec['seconds']:.1f} s; published {rec['published']}):")
-        for who in ("recorder", "rosbag"):
-            r = rec[who]
-            say(f"  {who:9s} stored {r['stored_total']:6d} msgs = {r['stored_per_s']:7.1f} msgs/s, "
-                f"drops {r['drops_total']} {r['drops']}")
-        say(f"  ratio recorder/rosbag (messages stored per s of publishing): {rec['ratio_stored_per_s']:.3f}")
-        say(f"  recorder in time: {rec['recorder_stored_while_publishing']} stored when publishing ended "
-            f"({rec['recorder_realtime_per_s']:.0f} msgs/s), all stored "
-            f"{rec['recorder_drain_seconds_after_publishing']:.1f} s later: sustained "
-            f"{rec['recorder_sustained_per_s']:.0f} msgs/s = {rec['ratio_sustained']:.2f} x rosbag "
-            f"({rec['megabytes']:.0f} MB published; {rec['recorder_spooled']} went through the spool)")
-        figures = rec["cpu"]
-        say("  CPU seconds from the start of publishing (user+system; x rosbag record's record process), "
-            "peak RSS:")
-        for key, who in (("rosbag_record", "rosbag record (record)"), ("rosbag_all", "rosbag record (all)"),
-                         ("recorder", "ros_mongo_server"), ("store", f"{backend} server"),
-                         ("recorder_and_store", "recorder + server")):
-            rss = figures["peak_rss_mb"].get(key)
-            per_mb = figures["per_mb"][key] * 1000
-            say(f"    {who:24s} {figures['seconds'][key]:6.2f} s = {per_mb:6.2f} ms/MB "
-                f"= {figures['x_rosbag_record'][key]:5.2f} x" + (f", peak RSS {rss:.0f} MB" if rss else ""))
+    for name, fault in results.get("fault", {}).items():
+        seconds = fault["fault_seconds"]
+        what = (f"{2 * seconds:.0f} s of central unreachable into a {fault['spool_max_mb']} MB spool"
+                if fault["spool_max_mb"] else f"{seconds:.0f} s of 401 then {seconds:.0f} s of 500 timeout")
+        say(f"{name} ({what}): published {sum(fault['published'].values())}, lost {fault['lost_total']} "
+            f"{fault['lost']}, dropped as counted on /diagnostics {fault['dropped_counted']} (every loss "
+            f"counted: {fault['every_loss_counted']}); spool drained "
+            f"{fault['drain_seconds_after_recovery']:.1f} s after recovery; recorder peak RSS "
+            f"{fault['peak_rss_mb']:.0f} MB")
+    say("record (robot-side CPU seconds from the start of publishing, x rosbag record's record process "
+        "in the same run):")
+    say(f"  {'configuration':58s} {'stored/s x':>10s} {'drops':>6s} {'robot CPU s':>11s} {'x rosbag':>8s} "
+        f"{'rosbag s':>8s}  peak RSS MB")
+    for name, rec in results.get("record", {}).items():
+        cpu = rec["cpu"]
+        rss = ", ".join(f"{k} {v:.0f}" for k, v in cpu["peak_rss_mb"].items())
+        say(f"  {rec['title']:58s} {rec['ratio_stored_per_s']:10.3f} {rec['recorder']['drops_total']:6d} "
+            f"{cpu['seconds']['robot_side']:11.2f} {cpu['x_rosbag_record']['robot_side']:8.2f} "
+            f"{cpu['seconds']['rosbag_record']:8.2f}  {rss}")
+        parts = ", ".join(f"{k} {v:.2f}" for k, v in cpu["seconds"].items()
+                          if k not in ("robot_side", "rosbag_record"))
+        say(f"    {name}: {rec['stored_while_publishing']} stored while publishing, all "
+            f"{rec['drain_seconds_after_publishing']:.1f} s later (sustained {rec['ratio_sustained']:.2f} x "
+            f"rosbag); CPU s: {parts}; rosbag drops {rec['rosbag']['drops_total']}")
     for backend, imp in results.get("import", {}).items():
         if "raw_msgs_per_s" not in imp:
-            say(f"import ({backend}, {imp['messages']} msgs, {imp['megabytes']:.0f} MB): "
-                f"{imp['import_msgs_per_s']:.0f} msgs/s, {imp['import_mb_per_s']:.1f} MB/s (for the replay)")
+            say(f"import ({backend}, {imp['messages']} msgs): {imp['import_msgs_per_s']:.0f} msgs/s "
+                f"(for the replay)")
             continue
         say(f"import ({backend}, {imp['messages']} msgs, {imp['megabytes']:.0f} MB): "
-            f"{imp['import_msgs_per_s']:.0f} msgs/s, {imp['import_mb_per_s']:.1f} MB/s; raw bulk insert "
-            f"{imp['raw_msgs_per_s']:.0f} msgs/s, {imp['raw_mb_per_s']:.1f} MB/s (before / after the "
-            f"import {imp['raw_before_msgs_per_s']:.0f} / {imp['raw_after_msgs_per_s']:.0f}); ratio "
+            f"{imp['import_msgs_per_s']:.0f} msgs/s; raw bulk {imp['raw_msgs_per_s']:.0f} msgs/s (before / "
+            f"after {imp['raw_before_msgs_per_s']:.0f} / {imp['raw_after_msgs_per_s']:.0f}): ratio "
             f"{imp['ratio_msgs']:.2f} (msgs) {imp['ratio_mb']:.2f} (MB)")
-    fault = results.get("fault")
-    if fault:
-        seconds = fault["fault_seconds"]
-        say(f"fault run (CouchDB; {seconds:.0f} s of 401 then {seconds:.0f} s of 500 timeout): published "
-            f"{sum(fault['published'].values())}, lost {fault['lost_total']} "
-            f"{fault['lost']} (target 0); spool drained {fault['drain_seconds_after_recovery']:.1f} s after "
-            f"recovery (peak {fault['peak_spool_pending']} pending); recorder peak RSS "
-            f"{fault['peak_rss_mb']:.0f} MB; counts {fault['counts']}")
-    for who, rep in results.get("replay", {}).items():
-        total = rep["all"]
+    replay = results.get("replay", {})
+    for who in ("rosbag_play", "ros_mongo_retriever"):
+        if who not in replay:
+            continue
+        rep = replay[who]
         per_run = ", ".join(f"{v:.2f}" for v in rep["p99_ms_per_run"])
-        say(f"replay {who:20s} gap error p50 {total['p50_ms']:.3f} ms, p99 {total['p99_ms']:.3f} ms "
-            f"(pooled over {len(rep['p99_ms_per_run'])} runs; p99 per run {per_run} ms), "
-            f"received {total['received']}/{total['expected']}")
+        say(f"replay {who:20s} gap error p50 {rep['all']['p50_ms']:.3f} ms, p99 "
+            f"{rep['all']['p99_ms']:.3f} ms (pooled, {len(rep['p99_ms_per_run'])} runs; per run {per_run}), "
+            f"received {rep['all']['received']}/{rep['all']['expected']}")
         for topic, value in rep.items():
             if topic.startswith("/"):
-                say(f"    {topic:24s} p50 {value['p50_ms']:.3f} ms, p99 {value['p99_ms']:.3f} ms, "
-                    f"received {value['received']}/{value['expected']}")
+                say(f"    {topic:24s} p50 {value['p50_ms']:.3f} ms, p99 {value['p99_ms']:.3f} ms")
+    if "p99_ratio" in replay:
+        ratio = replay["p99_ratio"]
+        say(f"replay p99 retriever / rosbag play: pooled {ratio['pooled']:.2f}; pairs median "
+            f"{ratio['median_pair']:.2f}, range {ratio['min_pair']:.2f}-{ratio['max_pair']:.2f}, "
+            f"{ratio['pairs_at_most_1']} of {len(ratio['pairs'])} pairs <= 1.0")
 
 
-def main(argv=None):
+def _arguments(argv):
+    from record_configs import CONFIGS
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="a smoke run: 4 s of publishing, CouchDB only")
-    parser.add_argument("--duration", type=float, help="seconds of publishing (default 20, quick 4)")
-    parser.add_argument("--backends", nargs="*", choices=BACKENDS, help="default: both (quick: couchdb)")
+    parser.add_argument("--quick", action="store_true", help="a smoke run: 5 s of publishing, short faults, "
+                        "CouchDB only, 2 replay pairs")
+    parser.add_argument("--duration", type=float, help="seconds of publishing (default 20, quick 5)")
+    parser.add_argument("--configs", nargs="*", choices=CONFIGS, help="record configurations (default all)")
+    parser.add_argument("--backends", nargs="*", choices=BACKENDS, help="import backends (default both)")
     parser.add_argument("--output", type=Path, default=ROOT / "artifacts" / "bench")
     parser.add_argument("--keep", action="store_true", help="keep the work folder (bags, databases)")
-    parser.add_argument("--bag", type=Path, help="skip recording: import and replay this bag (recorded by "
-                        "an earlier run with --keep)")
-    parser.add_argument("--replay-repeats", type=int, default=3,
-                        help="replays of each kind, alternating (default 3)")
+    parser.add_argument("--bag", type=Path, help="skip recording: import and replay this bag (kept by an "
+                        "earlier run with --keep)")
+    parser.add_argument("--replay-repeats", type=int, help="alternating replay pairs (default 6, quick 2)")
     parser.add_argument("--retriever-param", nargs="*", default=[], metavar="KEY=YAML",
                         help="extra ros_mongo_retriever parameters for the replay stage")
-    parser.add_argument("--fault-seconds", type=float, help="length of each injected fault (default 30, "
-                        "quick 5)")
-    parser.add_argument("--only-fault", action="store_true", help="run only the fault run")
-    parser.add_argument("--only-record", action="store_true", help="run only the record stage (with its "
-                        "CPU figures)")
-    parser.add_argument("--only-import", action="store_true", help="with --bag: run only the import "
-                        "stage (import and raw bulk rate, each backend)")
-    parser.add_argument("--only-replay", action="store_true", help="with --bag: import it into the first "
-                        "backend (no raw bulk rate), then run only the replay stage")
+    parser.add_argument("--fault-seconds", type=float, help="length of each fault (default 30, quick 5)")
+    parser.add_argument("--spool-mb", type=float, default=200.0, help="the full-spool run's ~spool_max_mb")
+    for stage in ("fault", "record", "import", "replay"):
+        parser.add_argument(f"--only-{stage}", action="store_true", help=f"run only the {stage} stage")
+    parser.add_argument("--publish", type=float, help=argparse.SUPPRESS)  # the load, as its own process
+    parser.add_argument("--wait-subscribers", type=int, default=1, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if (args.only_import or args.only_replay) and args.bag is None:
         parser.error("--only-import and --only-replay need --bag (a bag kept by an earlier run with --keep, "
-                     "e.g. artifacts/bench/ros_mongo_work/record_couchdb.bag)")
-    duration = args.duration or (4.0 if args.quick else 20.0)
-    backends = args.backends or (["couchdb"] if args.quick else list(BACKENDS))
-    fault_seconds = args.fault_seconds or (5.0 if args.quick else 30.0)
-    if args.only_fault:
-        backends = ["couchdb"]
-    if args.only_replay:
-        backends = backends[:1]
+                     "e.g. artifacts/bench/ros_mongo_work/record_remote_couchdb.bag)")
+    args.duration = args.duration or (5.0 if args.quick else 20.0)
+    args.fault_seconds = args.fault_seconds or (5.0 if args.quick else 30.0)
+    args.replay_repeats = args.replay_repeats or (2 if args.quick else 6)
+    quick_configs = [c for c in CONFIGS if c != "remote_mongodb"]
+    args.configs = args.configs or (quick_configs if args.quick else list(CONFIGS))
+    args.backends = args.backends or (["couchdb"] if args.quick else list(BACKENDS))
+    return args
+
+
+def main(argv=None):
+    args = _arguments(argv)
+    if args.publish is not None:
+        from bench_publisher import publish
+
+        return publish(args.publish, args.wait_subscribers)
+    from import_replay import bench_import, bench_replay
+    from record_configs import fault_run, record_config
+
     args.output.mkdir(parents=True, exist_ok=True)
-    work = args.output / "ros_mongo_work"
-    if args.bag is not None:
-        args.bag = args.bag.resolve()
-        work = args.output / "ros_mongo_work_replay"
+    work = args.output / ("ros_mongo_work" if args.bag is None else "ros_mongo_work_replay")
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
     core = RosCore(log_dir=work / "logs").start()
     os.environ.update(core.env())
-    servers = start_servers(work, backends)
+    needed = set(args.backends) | {"couchdb"} | {c.split("_", 1)[1] for c in args.configs
+                                                 if c.startswith("remote_")}
+    servers = start_servers(work, [b for b in BACKENDS if b in needed])
     import rospy
 
     rospy.init_node("ros_mongo_bench", anonymous=True, disable_signals=True)
     load = os.getloadavg()
-    results = {"duration": duration, "load_before": load, "cpus": os.cpu_count(), "record": {}}
+    results = {"duration": args.duration, "load_before": load, "cpus": os.cpu_count(), "record": {}}
+    only = [s for s in ("fault", "record", "import", "replay") if getattr(args, f"only_{s}")]
+    stages = only or (["import", "replay"] if args.bag else ["fault", "record", "import", "replay"])
     try:
-        if args.only_fault or (args.bag is None and not args.only_record):
-            say(f"fault run: {fault_seconds:.0f} s of 401, {fault_seconds:.0f} s of 500 timeout ...")
-            results["fault"] = bench_fault(core, servers["couchdb"], work, fault_seconds) \
-                if "couchdb" in servers else None
-        if args.only_fault:
-            return _finish(args, results, work, load, servers, core, name="ros_mongo_fault.json")
-        for backend in backends if args.bag is None else []:
-            say(f"record: {backend}, {duration:.0f} s of publishing ...")
-            results["record"][backend] = bench_record(core, servers[backend], work, duration, backend)
-        if args.only_record:
-            return _finish(args, results, work, load, servers, core, name="ros_mongo_record.json")
-        bag = args.bag or Path(results["record"][backends[0]]["bag"])
-        say("import ...")
-        targets = backends[:1] if args.only_replay else backends
-        results["import"] = bench_import(bag, {b: servers[b].database_url("bench") for b in targets},
-                                         raw_rate=not args.only_replay)
-        if args.only_import:
-            return _finish(args, results, work, load, servers, core, name="ros_mongo_import.json")
-        say("replay ...")
-        extra = {k: yaml.safe_load(v) for k, v in (p.split("=", 1) for p in args.retriever_param)}
-        results["replay"] = bench_replay(core, bag, servers[backends[0]].database_url("bench"), work, extra,
-                                         args.replay_repeats)
-    except BaseException:
-        _stop(servers, core, results)
-        raise
-    return _finish(args, results, work, load, servers, core)
-
-
-def _stop(servers, core, results):
-    import rospy
-
-    rospy.signal_shutdown("bench finished")
-    for server in servers.values():
-        server.stop()
-    core.stop()
-    results["load_after"] = os.getloadavg()
-
-
-def _finish(args, results, work, load, servers, core, name="ros_mongo.json"):
-    _stop(servers, core, results)
+        if "fault" in stages:
+            say(f"fault runs: {args.fault_seconds:.0f} s of 401 then of 500 timeout; then central "
+                f"unreachable for {2 * args.fault_seconds:.0f} s into a {args.spool_mb:.0f} MB spool ...")
+            results["fault"] = {
+                "fault": fault_run(core, servers["couchdb"], work, args.fault_seconds),
+                "full_spool": fault_run(core, servers["couchdb"], work, args.fault_seconds,
+                                        spool_max_mb=args.spool_mb)}
+        if "record" in stages:
+            for name in args.configs:
+                say(f"record: {name}, {args.duration:.0f} s of publishing ...")
+                results["record"][name] = record_config(core, servers, work, args.duration, name)
+        if "import" in stages or "replay" in stages:
+            bag = args.bag or Path(next(iter(results["record"].values()))["bag"])
+            say("import ...")
+            targets = args.backends[:1] if stages == ["replay"] else args.backends
+            results["import"] = bench_import(bag, {b: servers[b].database_url("bench") for b in targets},
+                                             raw_rate="import" in stages)
+        if "replay" in stages:
+            say("replay ...")
+            extra = {k: yaml.safe_load(v) for k, v in (p.split("=", 1) for p in args.retriever_param)}
+            results["replay"] = bench_replay(core, bag, servers[args.backends[0]].database_url("bench"), work,
+                                             extra, args.replay_repeats)
+    finally:
+        rospy.signal_shutdown("bench finished")
+        for server in servers.values():
+            server.stop()
+        core.stop()
+        results["load_after"] = os.getloadavg()
     report(results)
+    name = "ros_mongo.json" if not only else f"ros_mongo_{only[0]}.json"
     (args.output / name).write_text(json.dumps(results, indent=1, default=str))
-    if name == "ros_mongo.json":
+    if not only:
         plot_results(results, args.output)
     say(f"\nload average before {load[0]:.1f}, after {results['load_after'][0]:.1f} ({os.cpu_count()} CPUs); "
         f"figures in {args.output / name}")

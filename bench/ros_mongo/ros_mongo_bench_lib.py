@@ -1,4 +1,5 @@
-"""Helpers of bench/ros_mongo_bench.py: servers, watchers, counts, raw bulk rates, gap errors, plots."""
+"""Helpers of bench/ros_mongo/ros_mongo_bench.py (and fleet_bench.py): servers, watchers, CPU per
+process, counts, raw bulk rates, gap errors, plots."""
 import base64
 import json
 import os
@@ -319,16 +320,16 @@ def plot_results(results, output: Path):
 
     figure, axes = plt.subplots(1, 3, figsize=(16, 4.5))
     records = results.get("record", {})
-    labels, values = [], []
-    for backend, rec in records.items():
-        labels += [f"{backend}\nin time", f"{backend}\nsustained", "rosbag\n(same run)"]
-        values += [rec["recorder_realtime_per_s"], rec["recorder_sustained_per_s"],
-                   rec["rosbag"]["stored_per_s"]]
-    axes[0].bar(range(len(values)), values, color=["tab:cyan", "tab:blue", "tab:gray"] * len(records))
-    axes[0].set_xticks(range(len(values)), labels, fontsize=8)
-    axes[0].set_ylabel("messages stored / s")
+    names = list(records)
+    cpu = [records[n]["cpu"]["x_rosbag_record"]["robot_side"] for n in names]
+    axes[0].bar(range(len(names)), cpu, color="tab:blue")
+    axes[0].axhline(1.0, color="tab:gray", ls="--", label="rosbag record (same run)")
+    axes[0].axhline(1.3, color="tab:red", ls=":", label="target for the fleet default")
+    axes[0].set_xticks(range(len(names)), [n.replace("_", "\n", 1) for n in names], fontsize=8)
+    axes[0].set_ylabel("robot-side CPU s / rosbag record's")
     axes[0].set_title("recording 1 kHz odom + 30 Hz images + 40 Hz scans")
-    for backend, rec in records.items():
+    axes[0].legend(fontsize=8)
+    for backend, rec in records.items():  # (one line per configuration)
         line = np.array(rec["timeline"]) if rec["timeline"] else np.zeros((0, 4))
         if len(line):
             axes[1].plot(line[:, 0], line[:, 1], label=f"received ({backend})")

@@ -6,6 +6,8 @@ import time
 import genpy
 import pytest
 from geometry_msgs.msg import Point, Pose, PoseArray
+from nav_msgs.msg import Odometry
+from ros_mongo_samples import custom_message, image, joints, odometry, scan
 from sensor_msgs.msg import Image, LaserScan
 from std_msgs.msg import Int64, String, UInt64MultiArray
 
@@ -21,13 +23,19 @@ from ros_mongo import (
     parse_query,
 )
 from ros_mongo.allocator import keep_freed_memory
+from ros_mongo.bounded_spool import BoundedSpool
 from ros_mongo.documents import query_conditions, to_selector
-from ros_mongo.msgtypes import message_class, to_fields
+from ros_mongo.msgtypes import (
+    index_fields,
+    message_class,
+    reference_fields,
+    reference_index_fields,
+    to_fields,
+)
+from ros_mongo.params import RecorderParams, RetrieverParams, configured_query
 from ros_mongo.recorder import Recorder
 from ros_mongo.records import new_message_id, split_time
 from ros_mongo.replay import Replayer
-from ros_mongo.ros_recorder import RecorderConfig
-from ros_mongo.ros_retriever import RetrieverConfig, configured_query
 from ros_mongo.spool import Spool
 
 
@@ -73,6 +81,27 @@ def test_fields_are_json_safe():
     assert to_fields(Image(data=bytes([1, 2, 3])))["data"] == [1, 2, 3]
     poses = to_fields(PoseArray(poses=[Pose(position=Point(1, 2, 3)), Pose()]))
     assert poses["poses"][0]["position"] == {"x": 1, "y": 2, "z": 3} and len(poses["poses"]) == 2
+
+
+def test_compiled_fields_match_the_reference_converters():
+    """The generated per-class converters (the recorder's hot path) give exactly what the generic
+    field-by-field converters give, at both levels, for finite and non-finite values alike."""
+    odom_nan = odometry()
+    odom_nan.twist.twist.linear.y = math.nan
+    big = Odometry()
+    big.pose.pose.position.x, big.pose.pose.position.y = 1e308, 1e308  # a sum that overflows
+    wide = UInt64MultiArray(data=[2 ** 64 - 1])
+    wide.layout.data_offset = 7
+    messages = [odometry(), odom_nan, big, scan(), image(), joints(), custom_message(), wide,
+                Int64(data=-(2 ** 63)), LaserScan(range_max=math.inf, ranges=[math.nan]),
+                PoseArray(poses=[Pose(position=Point(1, 2, math.inf)), Pose()])]
+    for msg in messages:
+        assert to_fields(msg) == reference_fields(msg), msg._type
+        assert to_fields(msg, 2) == reference_fields(msg, 2), msg._type
+        assert index_fields(msg) == reference_index_fields(msg), msg._type
+    assert index_fields(odom_nan)["twist"]["twist"]["linear"]["y"] == "NaN"
+    assert to_fields(big)["pose"]["pose"]["position"]["x"] == 1e308
+    assert "covariance" not in index_fields(odometry())["pose"]
 
 
 def test_unknown_type_needs_a_definition():
@@ -131,7 +160,7 @@ def test_spool_cuts_a_torn_frame_and_is_exclusive(tmp_path):
 @pytest.mark.db
 def test_recorder_spools_what_the_queue_cannot_hold_and_stores_it_decoded(couchdb_url, tmp_path):
     with open_store(couchdb_url) as store:
-        spool = Spool(tmp_path / "rec.spool").open()
+        spool = BoundedSpool(tmp_path / "rec.spool").open()
         recorder = Recorder(store, spool, max_queue_bytes=100, batch_period=0.05, session_id="s",
                             topic_tags={"/chatter": ["talk"]}).start()
         for i in range(300):  # each message is about 10 bytes: most overflow to the spool
@@ -201,22 +230,22 @@ def test_replay_of_nothing_finishes(replay_store):
 # -- node parameters -----------------------------------------------------------------------------
 # (config/*.yaml are generated from these classes; tests/test_structure.py checks they are current)
 def test_recorder_config_rejects_a_bad_pattern_and_unknown_keys():
-    assert RecorderConfig.from_mapping({}).topics == ["/camera/rgb/image_raw", "/joint_states", "/scan",
+    assert RecorderParams.from_mapping({}).topics == ["/camera/rgb/image_raw", "/joint_states", "/scan",
                                                       "/odom"]
     with pytest.raises(ConfigError, match="~include holds a bad regular expression"):
-        RecorderConfig.from_mapping({"include": ["("]})
+        RecorderParams.from_mapping({"include": ["("]})
     with pytest.raises(ConfigError, match="unknown parameter"):
-        RecorderConfig.from_mapping({"batchsize": 10})
+        RecorderParams.from_mapping({"batchsize": 10})
 
 
 def test_retriever_config_builds_its_query():
-    config = RetrieverConfig.from_mapping({"topics": ["/odom", "/scan"], "start_time": 5,
+    config = RetrieverParams.from_mapping({"topics": ["/odom", "/scan"], "start_time": 5,
                                            "query": "tags lidar"})
     query = configured_query(config)
     assert query.topics == ["/odom", "/scan"] and query.tags == ["lidar"] and query.start_time == 5.0
     assert query.end_time is None
     with pytest.raises(ConfigError, match="bad query: unknown query key"):
-        RetrieverConfig.from_mapping({"query": "colour red"})
+        RetrieverParams.from_mapping({"query": "colour red"})
 
 
 # -- the one Query -> filter translation ---------------------------------------------------------

@@ -130,7 +130,7 @@ def test_the_cli_takes_the_password_from_a_file_and_never_shows_it(mongodb_url, 
 def test_bag_converter_never_puts_the_url_on_the_command_line(tmp_path):
     """roslaunch's own --args prints the node's command line as roslaunch would run it."""
     run = subprocess.run(["roslaunch", "--args", "/ros_mongo_bag_import", "ros_mongo", "bag_converter.launch",
-                          "bag:=/tmp/x.bag", "db_url:=mongodb://robot@db:27017/robot_data",
+                          f"bag:={tmp_path / 'x.bag'}", "db_url:=mongodb://robot@db:27017/robot_data",
                           f"db_credentials_file:={tmp_path / 'creds'}"],
                          capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert run.returncode == 0, run.stderr

@@ -2,9 +2,10 @@
 cluster timeouts and quorum, cut-off bodies, latency, a reverse proxy's path prefix.
 
 These answers come from ros_harness.fault_proxy: a REAL process on its own port in front of a real
-pouchdb-server, answering with the exact status and JSON bodies a real CouchDB 3.5 gave
-(/work/shared/DATABASES.md), switched on and off while the real recorder node (roscore + roslaunch)
-runs. Expected values come from what the test published, never from the code under test.
+pouchdb-server, answering with the exact status and JSON bodies a real CouchDB 3.5 gave (as
+measured and written down in the team's database notes), switched on and off while the real
+recorder node (roscore + roslaunch) runs. Expected values come from what the test published, never
+from the code under test.
 """
 import json
 import subprocess
@@ -22,12 +23,13 @@ from std_msgs.msg import String
 from ros_harness import FaultProxy, wait_until
 from ros_mongo import TopicInfo, make_record, open_store
 from ros_mongo.bagio import export_bag
+from ros_mongo.bounded_spool import BoundedSpool
 from ros_mongo.errors import StoreError, StoreRefused
 from ros_mongo.quarantine import import_quarantine
 from ros_mongo.query import parse_query
 from ros_mongo.recorder import Recorder
 from ros_mongo.records import MessageRecord, split_time
-from ros_mongo.spool import Spool, read_entries
+from ros_mongo.spool import read_entries
 
 pytestmark = [pytest.mark.db]
 
@@ -325,7 +327,7 @@ def test_a_full_spool_keeps_the_batches_in_memory_until_the_server_answers(couch
     limit = 4096
     with open_store(proxy.database_url(name)) as store:
         proxy.set(timeout="writes")
-        spool = Spool(tmp_path / "rec.spool", max_bytes=limit, min_free_bytes=0).open()
+        spool = BoundedSpool(tmp_path / "rec.spool", max_bytes=limit, min_free_bytes=0).open()
         recorder = Recorder(store, spool, batch_size=50, batch_period=0.05, retry_period=0.2).start()
         for i in range(600):
             assert recorder.receive("/chatter", serialized(String(data=f"m{i}")),

@@ -299,7 +299,8 @@ def test_replicator_reports_lag_and_obeys_start_stop_trigger(roslaunch, rospy_no
         central_url = central.database_url("fleet")
         status = ReplicatorStatus(robot_id)
         launch = roslaunch(str(workspace_root / "launch" / "fleet.launch"), central_url=central_url,
-                           robot_id=robot_id, local_db="false", local_db_port=robot.port,
+                           robot_id=robot_id, local_db="true", local_db_server="false",
+                           local_db_port=robot.port,
                            topics="[/odom]", spool_path=str(tmp_path / "spool"))
         launch.wait_for_services(["/ros_mongo_replicator/stop", "/ros_mongo_replicator/start",
                                   "/ros_mongo_replicator/trigger"], timeout=LONG)
@@ -355,7 +356,8 @@ class Robot:
         self.launches = LaunchSet(self.core, self.work / "launch")
         self.launch = self.launches(str(workspace_root / "launch" / "fleet.launch"),
                                     central_url=central_url, robot_id=self.robot_id,
-                                    local_db="false", local_db_port=self.store.port,
+                                    local_db="true", local_db_server="false",
+                                    local_db_port=self.store.port,
                                     topics="[/odom, /camera/rgb/image_raw]",
                                     spool_path=str(self.work / "recorder.spool"))
         self.publisher = None

@@ -18,10 +18,9 @@ from ros_mongo.legacy import (
     original_document,
     original_message,
 )
+from ros_mongo.params import RecorderParams, RetrieverParams
 from ros_mongo.query import Query, parse_query
 from ros_mongo.records import StoredMessage
-from ros_mongo.ros_recorder import RecorderConfig
-from ros_mongo.ros_retriever import RetrieverConfig
 
 ORIGINAL_CONFIG = {"server_ip": "localhost", "port": 27017, "data_rate": 10, "log_image": True,
                    "log_joint": True, "log_lidar": True, "log_odom": False, "log_realsense": True,
@@ -39,7 +38,7 @@ def _lookup(params):
 
 def test_the_original_config_configures_the_recorder_with_one_warning_per_parameter():
     warnings = []
-    config = legacy_config(RecorderConfig, "recorder", {}, _lookup(ORIGINAL_CONFIG), warnings.append)
+    config = legacy_config(RecorderParams, "recorder", {}, _lookup(ORIGINAL_CONFIG), warnings.append)
     assert config.db_url == "mongodb://localhost:27017/test_database"
     assert config.topics == ["/camera/rgb/image_raw", "/joint_states", "/scan"]  # log_odom false
     assert config.author == "ServiceRobot"
@@ -54,7 +53,7 @@ def test_the_original_config_configures_the_recorder_with_one_warning_per_parame
 def test_private_parameters_win_over_the_original_globals():
     warnings = []
     private = {"db_url": "http://127.0.0.1:5984/mine", "author": "Alice"}
-    config = legacy_config(RecorderConfig, "recorder", private, _lookup(ORIGINAL_CONFIG), warnings.append)
+    config = legacy_config(RecorderParams, "recorder", private, _lookup(ORIGINAL_CONFIG), warnings.append)
     assert config.db_url == "http://127.0.0.1:5984/mine"
     assert config.author == "Alice"
     ignored = [line for line in warnings if "ignored" in line]
@@ -63,21 +62,21 @@ def test_private_parameters_win_over_the_original_globals():
 
 
 def test_private_parameters_at_their_defaults_count_as_not_given():
-    defaults = RecorderConfig.defaults()  # what the launch file loads from config/*.yaml
+    defaults = RecorderParams.defaults()  # what the launch file loads from config/*.yaml
     overrides, _ = legacy_overrides("recorder", {"author": "Bob"}, defaults, defaults)
     assert overrides == {"author": "Bob"}
 
 
 def test_no_original_globals_means_no_warning_and_todays_config():
     warnings = []
-    config = legacy_config(RetrieverConfig, "retriever", {}, _lookup({}), warnings.append)
+    config = legacy_config(RetrieverParams, "retriever", {}, _lookup({}), warnings.append)
     assert warnings == []
-    assert config == RetrieverConfig()
+    assert config == RetrieverParams()
 
 
 def test_the_retriever_takes_server_ip_port_and_data_rate():
     warnings = []
-    config = legacy_config(RetrieverConfig, "retriever", {"query": "tags lidar"},
+    config = legacy_config(RetrieverParams, "retriever", {"query": "tags lidar"},
                            _lookup({"server_ip": "10.1.2.3", "data_rate": 25}), warnings.append)
     assert config.db_url == "mongodb://10.1.2.3:27017/test_database"
     assert config.fixed_rate == 25.0
@@ -99,8 +98,8 @@ def test_legacy_db_url_defaults_to_the_originals_server():
 
 def test_retrieve_launch_refuses_to_start_without_a_query():
     with pytest.raises(ConfigError, match="no query given"):
-        RetrieverConfig.from_mapping({"require_query": True})
-    assert RetrieverConfig.from_mapping({"require_query": True, "query": "tags lidar"}).query == "tags lidar"
+        RetrieverParams.from_mapping({"require_query": True})
+    assert RetrieverParams.from_mapping({"require_query": True, "query": "tags lidar"}).query == "tags lidar"
 
 
 # -- query forms -----------------------------------------------------------------------------

@@ -13,7 +13,7 @@ learner has folded in, and a new follower started `since` it yields only later c
 The selector is a Mango-style dict evaluated here on each document (`selects`): top-level fields,
 each either a value (equality) or `{"$eq" | "$ne" | "$in" | "$nin" | "$exists": ...}`. It is not
 sent to the server: `_changes?filter=_selector` is documented for CouchDB >= 2 but kills
-pouchdb-server (/work/shared/DATABASES.md), so both servers get the plain feed and the follower
+pouchdb-server, so both servers get the plain feed and the follower
 drops the documents it does not want. Deletions (a robot's retention deletes only locally, but an
 operator may purge centrally) and design documents are never selected.
 
@@ -21,20 +21,18 @@ Errors: `poll` raises ReplicationUnavailable (retry later) / ReplicationRefused 
 ReplicationError (ros_mongo.replication); `follow` retries all of them, with back-off, and keeps
 the last one in `last_error`. Messages never contain credentials (URLs redacted).
 """
-import base64
 import logging
 import threading
-from dataclasses import dataclass
-from typing import Any, Dict, Iterator, List, NamedTuple, Optional, Sequence
+from typing import Any, Dict, Iterator, List, NamedTuple, Optional
 
-from robot_common.errors import ConfigError
-from robot_common.params import NodeConfig, param
+import pybase64
+
 from ros_mongo.backends.couch import CouchStore
 from ros_mongo.documents import stored_message
 from ros_mongo.errors import StoreError
+from ros_mongo.params import SOURCES, CentralSourceParams  # (their home is ros_mongo.params)
 from ros_mongo.records import StoredMessage
 from ros_mongo.replication import CouchDatabase, ReplicationError
-from ros_mongo.urls import with_credentials
 
 __all__ = ["FeedItem", "ChangesFollower", "matches_selector", "CentralSourceParams", "SOURCES"]
 
@@ -110,7 +108,7 @@ class ChangesFollower:
 
     def _decode(self, doc: Dict[str, Any]) -> Optional[StoredMessage]:
         try:
-            raw = base64.b64decode(doc["raw"]) if doc.get("raw") is not None else None
+            raw = pybase64.b64decode(doc["raw"]) if doc.get("raw") is not None else None
             return stored_message(doc, raw, self.store._load_blob, self.store.message_class)
         except (StoreError, ValueError, TypeError) as err:
             self.skipped += 1
@@ -160,42 +158,3 @@ class ChangesFollower:
         """Close the HTTP sessions."""
         self.database.close()
         self.store.close()
-
-
-
-SOURCES = ("topic", "central")  # where a learner's messages come from
-
-
-@dataclass
-class CentralSourceParams(NodeConfig):
-    """The parameters of a learner node that can learn from the central fleet database instead
-    of its topics (subclass it: the node's own parameters follow these)."""
-
-    source: str = param("topic", "where the learner's messages come from: its topics (topic) or "
-                                 "the central fleet database's _changes feed, every robot's "
-                                 "messages (central)", choices=SOURCES)
-    central_url: str = param("", "source central: the central CouchDB database URL, e.g. "
-                                 "http://central:5984/fleet (password-free)")
-    central_credentials_file: str = param("", "source central: file with user:password for "
-                                              "central_url (or ROS_MONGO_DB_USER / "
-                                              "ROS_MONGO_DB_PASSWORD in the environment)")
-    central_topics: List[str] = param([], "source central: recorded topics of the messages to "
-                                          "learn from; empty: every topic")
-
-    def check(self) -> None:
-        if self.source == "central" and not self.central_url.startswith(("http://", "https://")):
-            raise ConfigError("~central_url must be the central CouchDB database URL "
-                              "(http:// or https://) when ~source is central")
-
-    def central_follower(self, types: Sequence[str], since: Any = 0,
-                         topics: Optional[Sequence[str]] = None) -> "ChangesFollower":
-        """A follower of the central feed's message documents of `types` on `topics` (default:
-        `central_topics`; empty: every topic), from `since`, with the credentials of
-        `central_credentials_file`."""
-        url = with_credentials(self.central_url,
-                               credentials_file=self.central_credentials_file or None)
-        selector: Dict[str, Any] = {"type": {"$in": list(types)}}
-        topics = self.central_topics if topics is None else topics
-        if topics:
-            selector["topic"] = {"$in": list(topics)}
-        return ChangesFollower(url, selector=selector, since=since)

@@ -8,15 +8,18 @@ The recorder's error taxonomy (the same for every backend):
 - *this document is invalid* (`DocumentsRejected`, `BatchTooLarge`): the server refused documents
   on their own merits. A batch refused as a whole (`BatchTooLarge`) is split until the offending
   document is alone; only a document refused alone is rejected (and quarantined by the recorder).
-Messages of these errors never contain credentials (URLs are redacted).
+Messages of these errors never contain credentials (URLs are redacted). `StoreError` derives from
+`robot_common.errors.WorkspaceError` (one root for every error the workspace raises on purpose).
 """
 from typing import FrozenSet, Optional
+
+from robot_common.errors import WorkspaceError
 
 __all__ = ["StoreError", "StoreUnavailable", "StoreRefused", "DocumentsRejected", "BatchTooLarge",
            "QueryError", "UnknownTypeError", "BagError", "SpoolError"]
 
 
-class StoreError(Exception):
+class StoreError(WorkspaceError):
     """Base class: anything that went wrong while storing or loading messages."""
 
 

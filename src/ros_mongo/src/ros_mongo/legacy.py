@@ -30,6 +30,7 @@ import genpy
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Image, JointState, LaserScan
 
+from ros_mongo.errors import StoreError
 from ros_mongo.records import MessageRecord, StoredMessage, TopicInfo, make_record, new_message_id, split_time
 
 __all__ = ["LEGACY_DATABASE", "LEGACY_COLLECTION", "LEGACY_PARAMS", "DEFAULT_BAG_NAME", "WRITE_BAG",
@@ -134,7 +135,7 @@ def _truth(value: Any) -> bool:
 
 # -- the original's documents ------------------------------------------------------------------
 
-class LegacyDocumentError(ValueError):
+class LegacyDocumentError(StoreError, ValueError):
     """An original document that cannot become a message (no time, unknown tag, ...)."""
 
 

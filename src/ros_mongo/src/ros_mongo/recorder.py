@@ -36,10 +36,11 @@ from typing import Deque, Dict, List, Optional, Sequence, Tuple
 import genpy
 
 import ros_mongo.msgtypes as msgtypes
+from ros_mongo.bounded_spool import BoundedSpool
+from ros_mongo.decoding import DecodePolicy
 from ros_mongo.errors import DocumentsRejected, SpoolError, StoreError, UnknownTypeError
 from ros_mongo.quarantine import Quarantine
-from ros_mongo.records import MessageRecord, TopicInfo, make_record, new_message_id
-from ros_mongo.spool import Spool
+from ros_mongo.records import MessageRecord, TopicInfo, make_record, new_message_id, record_from_bytes
 from ros_mongo.store import MessageStore
 
 __all__ = ["Recorder", "ITEM_OVERHEAD"]
@@ -58,7 +59,8 @@ class Recorder:
 
     Args:
         store: an opened (or lazily connecting) MessageStore.
-        spool: an opened Spool (leftovers from an earlier run are drained too).
+        spool: an opened BoundedSpool (leftovers from an earlier run are drained too; its policy
+            says which topics lose their oldest messages when it is full).
         batch_size, batch_period: a batch is written when either is reached.
         max_queue_bytes: memory for received messages waiting (payload + ITEM_OVERHEAD each);
             more go to the spool.
@@ -66,13 +68,16 @@ class Recorder:
         writers: writer threads.
         session_id, robot_id, tags, author: stored with every message; topic_tags adds tags per topic.
         quarantine_path: where refused documents go (default: the spool path + ".quarantine").
+        decode: how much of each topic's messages is decoded into queryable fields
+            (ros_mongo.decoding; default: everything).
     """
 
-    def __init__(self, store: MessageStore, spool: Spool, *, batch_size: int = 500,
+    def __init__(self, store: MessageStore, spool: BoundedSpool, *, batch_size: int = 500,
                  batch_period: float = 0.2, max_queue_bytes: int = 1 << 30, retry_period: float = 1.0,
                  writers: int = 2, session_id: Optional[str] = None, robot_id: Optional[str] = None,
                  tags: Sequence[str] = (), topic_tags: Optional[Dict[str, Sequence[str]]] = None,
-                 quarantine_path: Optional[str] = None, author: Optional[str] = None):
+                 quarantine_path: Optional[str] = None, author: Optional[str] = None,
+                 decode: Optional[DecodePolicy] = None):
         if batch_size < 1 or batch_period <= 0 or max_queue_bytes < 1 or retry_period <= 0 or writers < 1:
             raise ValueError(f"batch_size, batch_period, max_queue_bytes, retry_period and writers must "
                              f"be positive, got {batch_size!r}, {batch_period!r}, {max_queue_bytes!r}, "
@@ -86,6 +91,7 @@ class Recorder:
         self.session_id, self.robot_id, self.tags = session_id, robot_id, list(tags)
         self.author = author or None
         self.topic_tags = {topic: list(t) for topic, t in (topic_tags or {}).items()}
+        self.decode = decode or DecodePolicy()
         self._cond = threading.Condition()
         self._queue: Deque[tuple] = deque()
         self._queued_bytes = 0
@@ -96,7 +102,7 @@ class Recorder:
         self._threads: List[threading.Thread] = []
         self._count_lock = threading.Lock()
         self._spill_lock = threading.Lock()
-        self._spilled_topics: set = set()
+        self._dropped_topics: Dict[str, int] = {}
         self._order = threading.Condition()
         self._tickets = 0       # batches taken
         self._turn = 0          # the batch whose turn it is to be written
@@ -130,27 +136,41 @@ class Recorder:
         """Straight to the spool, undecoded (the fields are decoded when it is drained)."""
         record = self._raw_record(key, raw, receive.secs, receive.nsecs)
         with self._spill_lock:
-            entries: list = [record]
-            if (key, self.spool.generation) not in self._spilled_topics:
-                entries.insert(0, self._topics[key])  # a later recorder may drain this spool
             try:
-                self.spool.append(entries)
+                self.spool.append([record], self._topics)
             except SpoolError as err:
-                self._add("dropped", 1)
-                log.error("dropped a message on %s: queue full and %s", key[0], err)
+                self._drop({key[0]: 1}, f"queue full and {err}")
                 return False
-            self._spilled_topics.add((key, self.spool.generation))
         self._add("spooled", 1)
         return True
 
     def counts(self) -> Dict[str, int]:
-        """received, stored, dropped, rejected, quarantined, spooled (ever), spool_pending, queued,
-        queued_bytes, writer_restarts."""
+        """received, stored, dropped (by the recorder when memory and spool were both exhausted,
+        plus by the spool's policy when full), rejected, quarantined, spooled (ever), spool_pending,
+        queued, queued_bytes, writer_restarts."""
         with self._count_lock:
             counts = dict(self._counts)
+        counts["dropped"] += self.spool.dropped_total()
         counts.update(spool_pending=self.spool.pending_records, queued=len(self._queue),
                       queued_bytes=self._queued_bytes)
         return counts
+
+    def dropped_by_topic(self) -> Dict[str, int]:
+        """Messages dropped per topic (memory and spool exhausted, or the spool's policy)."""
+        with self._count_lock:
+            dropped = dict(self._dropped_topics)
+        for topic, count in dict(self.spool.dropped).items():
+            dropped[topic] = dropped.get(topic, 0) + count
+        return dropped
+
+    def _drop(self, per_topic: Dict[str, int], why: str) -> None:
+        with self._count_lock:
+            for topic, count in per_topic.items():
+                self._counts["dropped"] += count
+                self._dropped_topics[topic] = self._dropped_topics.get(topic, 0) + count
+        total = sum(per_topic.values())
+        self._set_fault(f"dropped {total} messages ({why})")
+        log.error("dropped %d messages %s: %s", total, per_topic, why)
 
     # -- the writers ---------------------------------------------------------------------------
     def start(self) -> "Recorder":
@@ -267,24 +287,12 @@ class Recorder:
 
     def _spool(self, entries: list) -> None:
         with self._spill_lock:
-            generation = self.spool.generation
-            missing = []  # a later recorder may drain this spool: each topic's info before its messages
-            for key in dict.fromkeys((e.topic, e.msg_type, e.md5sum, e.callerid) for e in entries
-                                     if isinstance(e, MessageRecord)):
-                if (key, generation) not in self._spilled_topics and key in self._topics:
-                    missing.append(self._topics[key])
-            entries = missing + entries
-            self.spool.append(entries)
-            for entry in entries:
-                if isinstance(entry, TopicInfo):
-                    self._spilled_topics.add(((entry.topic, entry.msg_type, entry.md5sum, entry.callerid),
-                                              generation))
+            self.spool.append(entries, self._topics)
         self._add("spooled", sum(isinstance(e, MessageRecord) for e in entries))
 
     def _keep_in_memory(self, items: List[tuple], err: SpoolError) -> None:
         """The spool is full: back to the front of the queue while memory lasts, else dropped."""
         size = sum(len(item[1]) + ITEM_OVERHEAD for item in items if len(item) > 1)
-        messages = sum(len(item) > 1 for item in items)
         with self._cond:
             # stopping: kept (and retried) until the stop's deadline, as the server may be back
             if (self._queued_bytes + size <= self.max_queue_bytes
@@ -298,9 +306,11 @@ class Recorder:
             self._set_fault(f"{self.fault or 'database failing'}; and the spool refuses writes: {err}")
             time.sleep(min(self.retry_period, 1.0))  # wait for the database or for disk space
         else:
-            self._add("dropped", messages)
-            self._set_fault(f"dropped {messages} messages: memory and spool both exhausted ({err})")
-            log.error("dropped %d messages: memory full and %s", messages, err)
+            per_topic: Dict[str, int] = {}
+            for item in items:
+                if len(item) > 1:
+                    per_topic[item[0][0]] = per_topic.get(item[0][0], 0) + 1
+            self._drop(per_topic, f"memory and spool both exhausted: {err}")
 
     def _add(self, counter: str, value: int) -> None:
         with self._count_lock:
@@ -340,9 +350,11 @@ class Recorder:
         try:
             self.quarantine.add(refused, self._topics)
         except SpoolError as error:
-            self._add("dropped", len(refused))
-            log.error("dropped %d refused messages: cannot write the quarantine file: %s", len(refused),
-                      error)
+            per_topic: Dict[str, int] = {}
+            for record in refused:
+                per_topic[record.topic] = per_topic.get(record.topic, 0) + 1
+            self._drop(per_topic, f"refused by the database and the quarantine file cannot be "
+                                  f"written: {error}")
             return
         self._add("quarantined", len(refused))
         log.error("the database refused %d messages on their own merits (kept in %s): %s", len(refused),
@@ -350,7 +362,7 @@ class Recorder:
 
     def _raw_record(self, key: _Key, raw: bytes, secs: int, nsecs: int) -> MessageRecord:
         return MessageRecord(new_message_id(secs, nsecs, self.robot_id), key[0], key[1], key[2], raw,
-                             secs, nsecs, tags=self.tags + self.topic_tags.get(key[0], []),
+                             secs, nsecs, tags=self._tags_of(key[0]),
                              session_id=self.session_id, robot_id=self.robot_id, callerid=key[3],
                              author=self.author)
 
@@ -358,10 +370,13 @@ class Recorder:
         cls = self._message_class(key)
         if cls is None:
             return self._raw_record(key, raw, secs, nsecs)
-        return make_record(key[0], cls, raw, receive=genpy.Time(secs, nsecs),
-                           tags=self.tags + self.topic_tags.get(key[0], []),
-                           session_id=self.session_id, robot_id=self.robot_id,
-                           max_array_len=self.store.max_array_len, callerid=key[3], author=self.author)
+        return record_from_bytes(key[0], cls, raw, secs, nsecs, tags=self._tags_of(key[0]),
+                                 session_id=self.session_id, robot_id=self.robot_id,
+                                 max_array_len=self.store.max_array_len, callerid=key[3], author=self.author,
+                                 decode=self.decode.level(key[0], key[1]))
+
+    def _tags_of(self, topic: str) -> List[str]:
+        return [str(t) for t in self.tags + self.topic_tags.get(topic, [])]
 
     def _message_class(self, key: _Key) -> Optional[type]:
         if key not in self._classes:
@@ -378,16 +393,15 @@ class Recorder:
         for entry in entries:
             if isinstance(entry, TopicInfo):
                 self._topics.setdefault((entry.topic, entry.msg_type, entry.md5sum, entry.callerid), entry)
-            elif entry.fields is None:
+            elif entry.fields is None and entry.header_stamp is None:
                 key = (entry.topic, entry.msg_type, entry.md5sum, entry.callerid)
                 cls = self._message_class(key) if key in self._topics else None
                 if cls is not None:
-                    try:
-                        message = msgtypes.decode(cls, entry.raw)
-                    except UnknownTypeError:
-                        continue
-                    entry.header_stamp = msgtypes.header_stamp(message)
-                    entry.fields = msgtypes.to_fields(message, self.store.max_array_len)
+                    done = make_record(entry.topic, cls, entry.raw, record_id=entry.id,
+                                       receive=genpy.Time(entry.receive_secs, entry.receive_nsecs),
+                                       max_array_len=self.store.max_array_len,
+                                       decode=self.decode.level(entry.topic, entry.msg_type))
+                    entry.header_stamp, entry.fields = done.header_stamp, done.fields
 
     # -- faults ----------------------------------------------------------------------------------
     def _set_fault(self, text: str) -> None:
@@ -423,15 +437,16 @@ class Recorder:
             self._drain_once()
 
     def _drain_once(self) -> None:
-        entries, offset = self.spool.read(max_entries=self.batch_size, max_bytes=32 * 1024 * 1024)
+        entries, token = self.spool.read(max_entries=self.batch_size, max_bytes=32 * 1024 * 1024)
         records = sum(isinstance(e, MessageRecord) for e in entries)
         self._complete(entries)
         try:
             self._store(entries)
         except StoreError as err:  # never skipped: the entries stay in the spool
+            self.spool.release()
             self._went_down(err)
             return
         self._clear_fault()
-        self.spool.commit(offset, records)
+        self.spool.commit(token, records)
         if not self.spool.pending:
             log.info("spool drained")

@@ -20,10 +20,11 @@ from typing import Any, Callable, Dict, List, Optional, Sequence
 import genpy
 
 import ros_mongo.msgtypes as msgtypes
+from ros_mongo.decoding import stamp_from_bytes
 from ros_mongo.errors import UnknownTypeError
 
-__all__ = ["TopicInfo", "MessageRecord", "StoredMessage", "make_record", "new_message_id",
-           "split_time", "id_part"]
+__all__ = ["TopicInfo", "MessageRecord", "StoredMessage", "make_record", "record_from_bytes",
+           "new_message_id", "split_time", "id_part"]
 
 _UNSAFE = re.compile(r"[^A-Za-z0-9._~]")
 
@@ -115,27 +116,43 @@ def make_record(topic: str, msg_class: type, raw: bytes, *, receive: Optional[ge
                 tags: Sequence[str] = (), session_id: Optional[str] = None,
                 robot_id: Optional[str] = None, record_id: Optional[str] = None,
                 message=None, max_array_len: int = msgtypes.MAX_ARRAY_LEN,
-                callerid: str = "", author: Optional[str] = None) -> MessageRecord:
+                callerid: str = "", author: Optional[str] = None, decode: str = "full") -> MessageRecord:
     """A record for the serialized message `raw` of `msg_class` received at `receive`.
 
-    The fields are decoded from `raw` (or taken from `message` when given); bytes that do not
-    decode are still stored, with no fields.
+    The fields are decoded from `raw` (or taken from `message` when given) at the `decode` level
+    (ros_mongo.decoding: full, index or raw); bytes that do not decode are still stored, with no
+    fields.
     """
     receive = receive if receive is not None else split_time(time.time())
+    return record_from_bytes(topic, msg_class, raw, receive.secs, receive.nsecs, tags=[str(t) for t in tags],
+                             session_id=session_id, robot_id=robot_id, record_id=record_id, message=message,
+                             max_array_len=max_array_len, callerid=callerid, author=author, decode=decode)
+
+
+def record_from_bytes(topic: str, msg_class: type, raw: bytes, secs: int, nsecs: int, *,
+                      tags: List[str], session_id: Optional[str], robot_id: Optional[str],
+                      record_id: Optional[str] = None, message=None,
+                      max_array_len: int = msgtypes.MAX_ARRAY_LEN, callerid: str = "",
+                      author: Optional[str] = None, decode: str = "full") -> MessageRecord:
+    """`make_record` for the recorder's hot path: the receive time as (secs, nsecs), `tags` a
+    list of strings kept as given; decoding reuses one message object per thread and class."""
+    record = MessageRecord(
+        id=record_id or new_message_id(secs, nsecs, robot_id), topic=topic, msg_type=msg_class._type,
+        md5sum=msg_class._md5sum, raw=bytes(raw), receive_secs=secs, receive_nsecs=nsecs, tags=tags,
+        session_id=session_id, robot_id=robot_id, callerid=callerid or "", author=author or None)
+    if decode == "raw":
+        if getattr(msg_class, "_has_header", False):
+            record.header_stamp = stamp_from_bytes(record.raw)
+        return record
     if message is None:
         try:
-            message = msgtypes.decode(msg_class, raw)
+            message = msgtypes.decode_scratch(msg_class, raw)
         except UnknownTypeError:
             message = None
-    record = MessageRecord(
-        id=record_id or new_message_id(receive.secs, receive.nsecs, robot_id), topic=topic,
-        msg_type=msg_class._type, md5sum=msg_class._md5sum, raw=bytes(raw),
-        receive_secs=receive.secs, receive_nsecs=receive.nsecs,
-        tags=[str(t) for t in tags], session_id=session_id, robot_id=robot_id, callerid=callerid or "",
-        author=author or None)
     if message is not None:
         record.header_stamp = msgtypes.header_stamp(message)
-        record.fields = msgtypes.to_fields(message, max_array_len)
+        record.fields = (msgtypes.index_fields(message) if decode == "index"
+                         else msgtypes.to_fields(message, max_array_len))
     return record
 
 

@@ -3,16 +3,14 @@ import os
 import socket
 import threading
 import time
-from dataclasses import dataclass
-from typing import List, Optional
+from typing import Optional
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from std_srvs.srv import Trigger, TriggerResponse
 
-from robot_common.errors import ConfigError
-from robot_common.params import NodeConfig, param
-from robot_common.ros_node import read_config, run_node
+from robot_common.ros_node import read_config
+from ros_mongo.params import ReplicatorParams
 from ros_mongo.replication import (
     CouchDatabase,
     PendingTracker,
@@ -22,52 +20,19 @@ from ros_mongo.replication import (
     ReplicationStatus,
 )
 from ros_mongo.retention import Retention
-from ros_mongo.urls import CredentialsError, redact_url, with_credentials
+from ros_mongo.urls import with_credentials
 
-__all__ = ["ReplicatorConfig", "ReplicatorNode", "main"]
+__all__ = ["ReplicatorNode", "start"]
 
 CENTRAL_PASSWORD_ENV = "ROS_MONGO_CENTRAL_PASSWORD"
 CENTRAL_USER_ENV = "ROS_MONGO_CENTRAL_USER"
 RESTART_AFTER = 10.0  # seconds between restarts of a replication the store reports ended or failed
 
 
-@dataclass
-class ReplicatorConfig(NodeConfig):
-    local_url: str = param("http://127.0.0.1:5984/robot_data",
-                           "the robot's CouchDB-API database that the recorder writes (password-free)")
-    central_url: str = param("", "the central CouchDB database URL, e.g. http://central:5984/fleet "
-                                 "(password-free; required)")
-    central_credentials_file: str = param("", "file with user:password for central_url (or set "
-                                              "ROS_MONGO_CENTRAL_USER / ROS_MONGO_CENTRAL_PASSWORD)")
-    robot_id: str = param("", "this robot's id (names the replication); empty: the host name")
-    topics: List[str] = param([], "topics whose documents go up; empty: every recorded topic")
-    local_topics: List[str] = param([], "topics that stay on the robot (e.g. camera images)")
-    create_central_db: bool = param(True, "create the central database if missing (needs an admin "
-                                          "account on CouchDB 3; otherwise an admin creates it)")
-    autostart: bool = param(True, "start the replication when the node starts")
-    status_period: float = param(1.0, "seconds between checks and /diagnostics messages", minimum=0.1)
-    lag_warn: float = param(30.0, "seconds of lag above which the status is WARN", minimum=0.0)
-    max_tracked: int = param(100000, "pending documents followed one by one (beyond: estimated)",
-                             minimum=1)
-    retention_age: float = param(0.0, "delete local messages held centrally and older than this "
-                                      "(seconds); 0: keep everything", minimum=0.0)
-    retention_period: float = param(60.0, "seconds between retention passes", minimum=1.0)
-    retention_batch: int = param(5000, "documents read per retention pass, at most", minimum=1)
-    timeout: float = param(10.0, "seconds a database request may take", minimum=0.1)
-
-    def check(self) -> None:
-        if not self.central_url:
-            raise ConfigError("~central_url is required (the central CouchDB database URL)")
-        for name, value in (("local_url", self.local_url), ("central_url", self.central_url)):
-            if not value.startswith(("http://", "https://")):
-                raise ConfigError(f"~{name} must be an http(s):// CouchDB database URL, got "
-                                  f"{redact_url(value)!r}")
-
-
 class ReplicatorNode:
     """ros_mongo_replicator: keeps a continuous push replication from the robot's store to central.
 
-    Parameters: `ReplicatorConfig` (config/ros_mongo_replicator.yaml).
+    Parameters: `ReplicatorParams` (config/ros_mongo_replicator.yaml).
     Publishes: /diagnostics (diagnostic_msgs/DiagnosticArray), status "ros_mongo_replicator:
         <robot>": state, central_reachable, pending_docs, lag_docs, lag_seconds, confirmed,
         retention_deleted, last_error (redacted), local, central (redacted URLs).
@@ -76,7 +41,7 @@ class ReplicatorNode:
     The replication runs inside the robot's store: it goes on when this node stops.
     """
 
-    def __init__(self, config: ReplicatorConfig):
+    def __init__(self, config: ReplicatorParams):
         self.config = config
         self.robot_id = config.robot_id or socket.gethostname()
         environ = {"ROS_MONGO_DB_PASSWORD": os.environ.get(CENTRAL_PASSWORD_ENV, ""),
@@ -227,11 +192,6 @@ class ReplicatorNode:
         self.diagnostics.publish(array)
 
 
-def _start() -> ReplicatorNode:
-    return ReplicatorNode(read_config(ReplicatorConfig)).setup()
-
-
-def main() -> int:
-    """The ros_mongo_replicator executable: exit status 1 with one line on a bad configuration."""
-    return run_node("ros_mongo_replicator", _start, loggers=("ros_mongo",),
-                    fatal=(ReplicationError, CredentialsError, ValueError))
+def start() -> ReplicatorNode:
+    """Build the replicator node from its parameters and wire it to ROS (for run_node)."""
+    return ReplicatorNode(read_config(ReplicatorParams)).setup()

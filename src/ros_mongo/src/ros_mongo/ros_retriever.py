@@ -1,90 +1,36 @@
 """The ros_mongo_retriever node: stored messages back onto ROS topics (exact bytes).
 
-Its parameters are `RetrieverConfig` (config/ros_mongo_retriever.yaml is generated from it).
+Its parameters are `ros_mongo.params.RetrieverParams` (config/ros_mongo_retriever.yaml is generated
+from it); the executable nodes/ros_mongo_retriever runs `start` through robot_common.ros_node.run_node.
 """
 import json
-import sys
 import threading
 import time
 import warnings
-from dataclasses import dataclass
-from typing import Any, Dict, List, Tuple
+from typing import Dict, Tuple
 
 import rosgraph
 import rospy
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger, TriggerResponse
 
-from robot_common.errors import ConfigError
-from robot_common.params import NodeConfig, param
-from robot_common.ros_node import run_node
 from ros_mongo.errors import QueryError, StoreError
 from ros_mongo.legacy import legacy_config, original_document
-from ros_mongo.query import Query, parse_query, query_from_mapping
+from ros_mongo.params import RetrieverParams, configured_query
+from ros_mongo.query import Query, parse_query
 from ros_mongo.records import TopicInfo
 from ros_mongo.replay import Replayer, ReplayItem
 from ros_mongo.srv import Count, CountResponse, SensorData, SensorDataResponse, Start, StartResponse
 from ros_mongo.store import open_store
 from ros_mongo.urls import PASSWORD_ENV, password_in_url, redact_url
 
-__all__ = ["RetrieverNode", "RetrieverConfig", "configured_query", "raw_class", "main"]
-
-
-@dataclass
-class RetrieverConfig(NodeConfig):
-    """The ros_mongo_retriever node's parameters."""
-
-    db_url: str = param("http://127.0.0.1:5984/robot_data",
-                        "http(s):// CouchDB or mongodb:// MongoDB database URL, password-free (a "
-                        "password here shows in parameter listings: use db_credentials_file)")
-    db_credentials_file: str = param("", "file holding 'user:password' or 'password' for db_url "
-                                         "(empty: $ROS_MONGO_DB_PASSWORD, if set)")
-    query: str = param("", "YAML/JSON query mapping or the original '<key> <value>' form ('tags "
-                           "lidar', 'author ServiceRobot'); its keys override the query parameters below")
-    require_query: bool = param(False, "refuse to start without ~query, as the original's "
-                                       "retrieve.launch did (which sets it)")
-    topics: List[str] = param([], "query: only these topics (empty: all)")
-    type: str = param("", "query: only this message type (empty: any)")
-    tags: List[str] = param([], "query: only messages with all these tags")
-    session_id: str = param("", "query: only this session (empty: any)")
-    robot_id: str = param("", "query: only this robot (empty: any)")
-    start_time: float = param(0.0, "query: receive time from (seconds; 0.0: open)")
-    end_time: float = param(0.0, "query: receive time until (seconds; 0.0: open)")
-    fields: Dict[str, Any] = param({}, "query: conditions on decoded message fields")
-    output_suffix: str = param("_mongo", "/scan is replayed on /scan<output_suffix>")
-    rate: float = param(1.0, "speed factor of the recorded timing")
-    start_offset: float = param(0.0, "seconds of the recording skipped at its start")
-    duration: float = param(0.0, "seconds of the recording played (0.0: all)")
-    loop: bool = param(False, "play again from the start when done")
-    fixed_rate: float = param(0.0, "messages per second instead of the recorded timing (0.0: off)")
-    publish_clock: bool = param(False, "publish /clock with the recorded time")
-    clock_rate: float = param(100.0, "/clock messages per second")
-    autostart: bool = param(True, "start playing at launch")
-    start_delay: float = param(1.0, "autostart: seconds given to subscribers launched alongside to "
-                                    "register, then at most as long again for the subscribers the "
-                                    "master knows of to connect")
-    prefetch: int = param(100000, "messages read ahead, at most (filled before playing)")
-    prefetch_mb: float = param(1024.0, "MB read ahead, at most")
-    preroll_timeout: float = param(15.0, "longest wait (s) for the read-ahead before playing")
-    queue_size: int = param(100, "outgoing queue per subscriber of topics above sync_max_bytes")
-    sync_max_bytes: int = param(16777216, "topics with larger messages are published through a queue; "
-                                          "smaller ones synchronously (exact timing)")
-    lane_min_bytes: int = param(65536, "messages this large are published by a thread of their "
-                                       "topic's own, so writing them does not delay other topics")
-    db_timeout: float = param(10.0, "seconds a database request may take")
-
-    def check(self) -> None:
-        if self.require_query and not self.query.strip():
-            raise ConfigError("no query given: retrieve.launch needs one, e.g. query:='tags lidar' or "
-                              "query:='author ServiceRobot' (to replay everything use "
-                              "ros_mongo_retrieve.launch)")
-        configured_query(self)
+__all__ = ["RetrieverNode", "raw_class", "start"]
 
 
 class RetrieverNode:
     """ros_mongo_retriever: replays stored messages onto `<topic><output_suffix>` topics.
 
-    Parameters: `RetrieverConfig` (each with its default and meaning; the launch file loads them
+    Parameters: `RetrieverParams` (each with its default and meaning; the launch file loads them
     from config/ros_mongo_retriever.yaml). Small messages are written synchronously by the player
     (exact timing: a subscriber that cannot keep up slows the replay down); larger ones than
     ~sync_max_bytes go through a queue of ~queue_size per subscriber.
@@ -96,7 +42,7 @@ class RetrieverNode:
     (ros_mongo.legacy).
     """
 
-    def __init__(self, config: RetrieverConfig):
+    def __init__(self, config: RetrieverParams):
         self.config = config
         self.query = configured_query(config)
         if password_in_url(config.db_url):
@@ -238,36 +184,10 @@ def raw_class(info: TopicInfo) -> type:
         "_has_header": False, "__slots__": []})
 
 
-def configured_query(config: RetrieverConfig) -> Query:
-    """The query the parameters describe (~query's keys override the others; ConfigError)."""
-    mapping = {"topics": config.topics, "type": config.type, "tags": config.tags,
-               "session_id": config.session_id, "robot_id": config.robot_id,
-               "start_time": config.start_time or None, "end_time": config.end_time or None,
-               "fields": config.fields or None, "author": None}
-    try:
-        if config.query.strip():
-            text_query = parse_query(config.query)
-            mapping.update({k: v for k, v in _as_mapping(text_query).items() if v not in (None, [], {})})
-        return query_from_mapping(mapping)
-    except QueryError as err:
-        raise ConfigError(f"bad query: {err}") from None
-
-
-def _as_mapping(query: Query) -> Dict:
-    return {"topics": query.topics, "type": query.msg_type, "tags": query.tags,
-            "session_id": query.session_id, "robot_id": query.robot_id, "start_time": query.start_time,
-            "end_time": query.end_time, "fields": query.fields, "author": query.author}
-
-
-def _start() -> RetrieverNode:
-    config = legacy_config(RetrieverConfig, "retriever", rospy.get_param("~", {}), rospy.get_param,
+def start() -> RetrieverNode:
+    """Build the retriever node from its parameters and wire it to ROS (for run_node)."""
+    config = legacy_config(RetrieverParams, "retriever", rospy.get_param("~", {}), rospy.get_param,
                            rospy.logwarn)
     node = RetrieverNode(config).setup()
     rospy.on_shutdown(node.shutdown)
     return node
-
-
-def main() -> int:
-    """The ros_mongo_retriever executable: exit status 1 with one line on a bad configuration."""
-    sys.setswitchinterval(0.0001)  # the player thread gets the interpreter back soon after it wakes
-    return run_node("ros_mongo_retriever", _start, loggers=("ros_mongo",), fatal=(StoreError, ValueError))

@@ -13,19 +13,20 @@ raises SpoolFull and writes nothing. The same framed format holds the recorder's
 (ros_mongo.quarantine).
 """
 import fcntl
-import json
 import os
 import struct
 import threading
 import zlib
-from dataclasses import asdict
+from dataclasses import fields
 from pathlib import Path
-from typing import List, Tuple, Union
+from typing import Dict, List, Tuple, Union
+
+import orjson
 
 from ros_mongo.errors import SpoolError
 from ros_mongo.records import MessageRecord, TopicInfo
 
-__all__ = ["Spool", "SpoolFull", "DEFAULT_MAX_BYTES", "DEFAULT_MIN_FREE_BYTES", "read_entries"]
+__all__ = ["Spool", "SpoolFull", "DEFAULT_MAX_BYTES", "DEFAULT_MIN_FREE_BYTES", "read_entries", "frames"]
 
 DEFAULT_MAX_BYTES = 4 << 30
 DEFAULT_MIN_FREE_BYTES = 1 << 30
@@ -99,11 +100,10 @@ class Spool:
 
     def append(self, entries: List[Entry]) -> None:
         """Write entries at the end (flushed to the OS before returning)."""
-        frames, records = [], 0
-        for entry in entries:
-            frames.append(_frame(entry))
-            records += isinstance(entry, MessageRecord)
-        data = b"".join(frames)
+        self.append_frames(*frames(entries))
+
+    def append_frames(self, data: bytes, records: int) -> None:
+        """Write entries framed by `frames` (holding `records` messages) at the end."""
         with self._lock:
             if self._end + len(data) > self.max_bytes:
                 raise SpoolFull(f"spool {self.path} is full: {self._end + len(data)} bytes would exceed "
@@ -155,6 +155,41 @@ class Spool:
                 self.generation += 1
             else:
                 self._write_offset()
+
+    def pending_topics(self) -> Dict[str, int]:
+        """Messages not yet drained, per topic (read from the frames' headers)."""
+        counts: Dict[str, int] = {}
+        with self._lock:
+            offset, end = self._offset, self._end
+            with open(self.path, "rb") as reader:
+                reader.seek(offset)
+                while offset < end:
+                    head = reader.read(_FRAME.size)
+                    if len(head) < _FRAME.size:
+                        break
+                    _magic, header_len, payload_len, _crc = _FRAME.unpack(head)
+                    header = orjson.loads(reader.read(header_len))
+                    reader.seek(payload_len, os.SEEK_CUR)
+                    if header.get("kind") == "message":
+                        counts[header["topic"]] = counts.get(header["topic"], 0) + 1
+                    offset += _FRAME.size + header_len + payload_len
+        return counts
+
+    def remove(self) -> None:
+        """Close and delete the spool file and its offset file (what it held is given up)."""
+        self.close()
+        for path in (self.path, self.offset_path):
+            try:
+                path.unlink()
+            except FileNotFoundError:
+                pass
+            except OSError as err:
+                raise SpoolError(f"cannot delete {path}: {err}") from err
+
+    @property
+    def size(self) -> int:
+        """Bytes the file holds (drained ones included until it is emptied)."""
+        return self._end
 
     def _read_offset(self) -> int:
         try:
@@ -210,13 +245,30 @@ def read_entries(path: Union[str, Path]) -> List[Entry]:
     return entries
 
 
+_TOPIC_FIELDS = tuple(f.name for f in fields(TopicInfo))
+_RECORD_FIELDS = tuple(f.name for f in fields(MessageRecord) if f.name != "raw")
+
+
+def frames(entries: List[Entry]) -> Tuple[bytes, int]:
+    """The frames of `entries` as one bytes object, and how many messages they hold."""
+    parts, records = [], 0
+    for entry in entries:
+        parts.append(_frame(entry))
+        records += isinstance(entry, MessageRecord)
+    return b"".join(parts), records
+
+
 def _frame(entry: Entry) -> bytes:
     if isinstance(entry, TopicInfo):
-        header, payload = {"kind": "topic", **asdict(entry)}, b""
-    else:
-        header = {"kind": "message", **{k: v for k, v in asdict(entry).items() if k != "raw"}}
+        header = {"kind": "topic", **{name: getattr(entry, name) for name in _TOPIC_FIELDS}}
+        payload = b""
+    else:  # the fields as they are (not deep-copied as dataclasses.asdict would)
+        header = {"kind": "message", **{name: getattr(entry, name) for name in _RECORD_FIELDS}}
         payload = entry.raw
-    header_bytes = json.dumps(header, separators=(",", ":")).encode("utf-8")
+    try:
+        header_bytes = orjson.dumps(header)
+    except TypeError as err:
+        raise SpoolError(f"cannot write a spool frame for {header.get('topic')}: {err}") from err
     crc = zlib.crc32(payload, zlib.crc32(header_bytes))
     return _FRAME.pack(MAGIC, len(header_bytes), len(payload), crc) + header_bytes + payload
 
@@ -233,7 +285,7 @@ def _read_frame(reader) -> Tuple[Union[Entry, None], int]:
     if len(header_bytes) < header_len or len(payload) < payload_len \
             or zlib.crc32(payload, zlib.crc32(header_bytes)) != crc:
         return None, 0
-    header = json.loads(header_bytes.decode("utf-8"))
+    header = orjson.loads(header_bytes)
     kind = header.pop("kind")
     entry = TopicInfo(**header) if kind == "topic" else MessageRecord(raw=payload, **header)
     return entry, _FRAME.size + header_len + payload_len

@@ -67,7 +67,8 @@ class SimulatedRobot:
         self.url = self.store.database_url("robot_data")
         self.launches = LaunchSet(self.core, self.work / "logs")
         self.fleet = self.launches(fleet_launch, central_url=central_url, robot_id=robot_id,
-                                   local_db="false", local_db_port=self.store.port,
+                                   local_db="true", local_db_server="false",
+                                   local_db_port=self.store.port,
                                    topics=f"[{TOPIC}]", spool_path=str(self.work / "recorder.spool"))
         self.index = index
         self.map_yaml = map_yaml

@@ -32,8 +32,6 @@ missing database the account may not create -> StoreRefused; 413 (`document_too_
 document) and 400 on `_bulk_docs` -> BatchTooLarge; 202 on `_bulk_docs` (no write quorum) ->
 the documents are looked up, and StoreUnavailable unless every one is there.
 """
-import base64
-import binascii
 import dataclasses
 import hashlib
 import heapq
@@ -43,6 +41,8 @@ import time
 from typing import Dict, Iterator, List, Optional, Tuple
 from urllib.parse import quote, unquote, urlsplit, urlunsplit
 
+import orjson
+import pybase64
 import requests
 
 from ros_mongo.backends.base import MessageStore, register_backend
@@ -206,7 +206,7 @@ class CouchStore(MessageStore):
         not copied once per document); with its bytes as the attachment `raw` and its revision
         given (`message_rev`, see `_write_blobs`) when `blob`."""
         doc = message_doc(record)
-        raw64 = binascii.b2a_base64(record.raw, newline=False)
+        raw64 = pybase64.b64encode(record.raw)  # SIMD base64: a tenth of binascii's CPU for images
         if not blob:
             doc["raw"] = raw64.decode("ascii")
         body = _dumps(doc)
@@ -305,7 +305,7 @@ class CouchStore(MessageStore):
     def _docs(self, query: Query, newest_first: bool, limit: Optional[int],
               decoded: bool) -> Iterator[Tuple[dict, Optional[bytes]]]:
         docs = self._merged(query, newest_first, limit, None if decoded else list(META_KEYS) + ["raw"])
-        return ((doc, base64.b64decode(doc["raw"]) if doc.get("raw") is not None else None)
+        return ((doc, pybase64.b64decode(doc["raw"]) if doc.get("raw") is not None else None)
                 for doc in docs)
 
     def _count(self, query: Query) -> int:
@@ -532,14 +532,12 @@ def _take(items: Iterator[dict], limit: int) -> Iterator[dict]:
         yield item
 
 
-_ENCODER = json.JSONEncoder(separators=(",", ":"), allow_nan=False)  # made once: json.dumps with
-# options builds a new encoder per call
-
-
 def _dumps(doc: dict) -> Optional[bytes]:
+    """Compact JSON (orjson: a fifth of the json module's CPU for the decoded fields); None for a
+    document that JSON cannot hold."""
     try:
-        return _ENCODER.encode(doc).encode("utf-8")
-    except (ValueError, TypeError):
+        return orjson.dumps(doc)
+    except TypeError:  # orjson.JSONEncodeError: an integer beyond 64 bits, a key that is no string
         return None
 
 
