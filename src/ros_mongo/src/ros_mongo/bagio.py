@@ -32,7 +32,7 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple, Union
+from typing import Dict, Iterator, List, Optional, Sequence, Set, Tuple, Union
 
 import genpy
 
@@ -88,28 +88,19 @@ def import_file(path: Union[str, Path], store: MessageStore, *, topics: Optional
     started, count, size = time.monotonic(), 0, 0
     writer = _BatchWriter(store)
     with format_of_file(path).reader(path, progress=progress) as reader:
-        source = robot_id or session_id
         bar = tqdm(total=reader.count(topics), unit="msg", desc=f"import {Path(path).name}",
                    disable=not progress)
         infos: List[TopicInfo] = []
         records: List[MessageRecord] = []
         batch_weight = 0
-        seen: Dict[Tuple[str, str, str, str], TopicInfo] = {}
-        per_topic: Dict[str, int] = {}
         try:
-            for message in reader.messages(topics):
-                info = _topic_info(message.topic, message.header, source)
-                if info.key not in seen:
-                    seen[info.key] = info
+            for info, record in _records(reader, topics, store, tags, session_id, robot_id):
+                if info is not None:
                     infos.append(info)
-                index = per_topic.get(message.topic, 0)
-                per_topic[message.topic] = index + 1
-                record_id = _bag_id(reader.fingerprint, message.topic, index, message.stamp, robot_id)
-                records.append(_record(message, record_id, tags, session_id, robot_id,
-                                       store.max_array_len, info.callerid))
+                records.append(record)
                 count += 1
-                size += len(message.data)
-                batch_weight += len(message.data)
+                size += len(record.raw)
+                batch_weight += len(record.raw)
                 if len(records) >= batch_size or batch_weight >= batch_bytes:
                     writer.put(infos, store.prepare_records(records), batch_weight)
                     bar.update(len(records))
@@ -120,6 +111,24 @@ def import_file(path: Union[str, Path], store: MessageStore, *, topics: Optional
             writer.close()
             bar.close()
     return TransferResult(count, size, time.monotonic() - started, writer.peak_bytes, reader.recovery)
+
+
+def _records(reader, topics, store: MessageStore, tags, session_id: str,
+             robot_id: Optional[str]) -> Iterator[Tuple[Optional[TopicInfo], MessageRecord]]:
+    """(its topic info when first seen, else None; its record) for every message of `reader`,
+    with the ids of the module doc."""
+    source = robot_id or session_id
+    seen: Set[tuple] = set()
+    per_topic: Dict[str, int] = {}
+    for message in reader.messages(topics):
+        info = _topic_info(message.topic, message.header, source)
+        first = info.key not in seen
+        seen.add(info.key)
+        index = per_topic.get(message.topic, 0)
+        per_topic[message.topic] = index + 1
+        record_id = _bag_id(reader.fingerprint, message.topic, index, message.stamp, robot_id)
+        yield (info if first else None), _record(message, record_id, tags, session_id, robot_id,
+                                                 store.max_array_len, info.callerid)
 
 
 def _session_name(path: Union[str, Path]) -> str:
