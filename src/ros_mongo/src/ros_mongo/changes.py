@@ -30,11 +30,10 @@ import pybase64
 from ros_mongo.backends.couch import CouchStore
 from ros_mongo.documents import stored_message
 from ros_mongo.errors import StoreError
-from ros_mongo.params import SOURCES, CentralSourceParams  # (their home is ros_mongo.params)
 from ros_mongo.records import StoredMessage
 from ros_mongo.replication import CouchDatabase, ReplicationError
 
-__all__ = ["FeedItem", "ChangesFollower", "matches_selector", "CentralSourceParams", "SOURCES"]
+__all__ = ["FeedItem", "ChangesFollower", "matches_selector"]
 
 logger = logging.getLogger(__name__)
 
@@ -158,3 +157,16 @@ class ChangesFollower:
         """Close the HTTP sessions."""
         self.database.close()
         self.store.close()
+
+
+def __getattr__(name: str):
+    """`CentralSourceParams` and `SOURCES` moved to ros_mongo.params: the old names still work,
+    with a DeprecationWarning (looked up lazily: ros_mongo.params imports this module)."""
+    if name in ("CentralSourceParams", "SOURCES"):
+        import importlib
+        import warnings
+
+        warnings.warn(f"ros_mongo.changes.{name} moved to ros_mongo.params.{name}", DeprecationWarning,
+                      stacklevel=2)
+        return getattr(importlib.import_module("ros_mongo.params"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -7,19 +7,17 @@ config/ are generated from these classes (`python -m robot_common.config_files -
 """
 import re
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Dict, List, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence
 
 from robot_common.errors import ConfigError
 from robot_common.params import NodeConfig, param
 from ros_mongo.bounded_spool import DROPPABLE_TYPES, DropPolicy
+from ros_mongo.changes import ChangesFollower
 from ros_mongo.decoding import DECODE_LEVELS, DecodePolicy
 from ros_mongo.errors import QueryError
 from ros_mongo.query import Query, parse_query, query_from_mapping
 from ros_mongo.spool import DEFAULT_MAX_BYTES, DEFAULT_MIN_FREE_BYTES
 from ros_mongo.urls import redact_url, with_credentials
-
-if TYPE_CHECKING:
-    from ros_mongo.changes import ChangesFollower
 
 __all__ = ["RecorderParams", "RetrieverParams", "ReplicatorParams", "CentralSourceParams", "SOURCES",
            "ORIGINAL_TOPICS", "ORIGINAL_TAGS", "configured_query", "compile_patterns"]
@@ -282,6 +280,4 @@ class CentralSourceParams(NodeConfig):
         topics = self.central_topics if topics is None else topics
         if topics:
             selector["topic"] = {"$in": list(topics)}
-        from ros_mongo.changes import ChangesFollower  # (changes imports this module)
-
         return ChangesFollower(url, selector=selector, since=since)
