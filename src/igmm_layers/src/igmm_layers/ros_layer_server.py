@@ -14,13 +14,15 @@ from visualization_msgs.msg import MarkerArray
 
 from igmm_layers.errors import IGMMError, InvalidInputError
 from igmm_layers.msg import ClusterSet
-from igmm_layers.params import LayerServerConfig
+from igmm_layers.params import LayerServerConfig, LayerServerParams
 from igmm_layers.ros_central import CentralSource
 from igmm_layers.ros_convert import apply_cluster_set, layer_markers, rotation_matrix, size_covariance
 from igmm_layers.ros_services import LayerServices
 from robot_common.msg import ObjectObservation
+from robot_common.ros_node import read_config
+from ros_mongo.urls import warn_password_in_url
 
-__all__ = ["LayerServer", "marker_topic"]
+__all__ = ["LayerServer", "marker_topic", "start"]
 
 Key = Tuple[str, str]
 
@@ -313,3 +315,16 @@ class LayerServer:
 
 def _private(name: str) -> str:
     return name if name.startswith(("/", "~")) else "~" + name
+
+
+def start() -> LayerServer:
+    """The node's start-up: read its parameters, build the server, wire ROS (see LayerServer)."""
+    config = LayerServerConfig.from_node_params(read_config(LayerServerParams))
+    warn_password_in_url(config.db_url)  # roslaunch prints parameters: say so at once
+    server = LayerServer(config)
+    server.setup()
+    rospy.loginfo(f"igmm_layers: ready; map frame {config.map_frame}, default region "
+                  f"{config.default_region}, {len(config.regions)} configured region layers, "
+                  f"database {'none' if not config.db_url else 'configured'}, observations from "
+                  f"{'the central fleet database' if config.source == 'central' else 'topics'}")
+    return server

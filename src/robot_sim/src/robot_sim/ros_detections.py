@@ -7,10 +7,11 @@ import rospy
 from geometry_msgs.msg import Point, Vector3
 
 from robot_common.msg import ObjectObservation
+from robot_common.ros_node import read_config
 from robot_sim.detections import building_detections, place_sightings
 from robot_sim.params import ObjectDetectionSimParams
 
-__all__ = ["DetectionSim", "observation"]
+__all__ = ["DetectionSim", "observation", "start"]
 
 OBJECTS_TOPIC = "/igmm_layers/observations"
 PLACES_TOPIC = "/igmm_layers/place_observations"
@@ -77,3 +78,11 @@ class DetectionSim:
                       f"({int(np.sum(self.detections.truth < 0))} clutter) and {len(self.places)} "
                       "place sightings")
         rospy.sleep(1.0)  # let the last messages leave the outgoing queues before exiting
+
+
+def start() -> None:
+    """The node's start-up: read its parameters, build it, wire ROS."""
+    sim = DetectionSim(read_config(ObjectDetectionSimParams))
+    sim.setup()
+    sim.publish_all()
+    rospy.signal_shutdown("all detections published")

@@ -5,10 +5,11 @@ import rospy
 from nav_msgs.msg import MapMetaData, OccupancyGrid
 
 from robot_common.ros_maps import grid_to_msg
+from robot_common.ros_node import read_config
 from robot_sim.building import building_or_map
 from robot_sim.params import MapPublisherParams
 
-__all__ = ["MapPublisher"]
+__all__ = ["MapPublisher", "start"]
 
 
 class MapPublisher:
@@ -40,3 +41,10 @@ class MapPublisher:
         grid = self.grid
         rospy.loginfo(f"map_publisher: {grid.width}x{grid.height} cells at {grid.resolution} m "
                       f"from {grid.meta.get('source')}")
+
+
+def start() -> MapPublisher:
+    """The node's start-up: read its parameters, build it, wire ROS."""
+    publisher = MapPublisher(read_config(MapPublisherParams))
+    publisher.setup()
+    return publisher

@@ -10,11 +10,12 @@ from nav_msgs.msg import OccupancyGrid
 from robot_common.maps import GridMap, load_map
 from robot_common.msg import PeopleCount
 from robot_common.ros_maps import msg_to_grid
+from robot_common.ros_node import read_config
 from robot_sim.building import generate_building
 from robot_sim.params import PeopleSimParams
 from robot_sim.people import PeopleSimulator, View
 
-__all__ = ["MONDAY_EPOCH", "sim_stamp", "map_from_topic", "PeopleSimNode"]
+__all__ = ["MONDAY_EPOCH", "sim_stamp", "map_from_topic", "PeopleSimNode", "start"]
 
 MONDAY_EPOCH = 1704067200.0   # Monday 2024-01-01 00:00 UTC
 
@@ -93,3 +94,12 @@ class PeopleSimNode:
             msg.seen_fraction = view.fractions.tolist()
             msg.counts = view.counts.astype(int).tolist()
         return msg
+
+
+def start() -> PeopleSimNode:
+    """The node's start-up: read its parameters, build it, wire ROS."""
+    config = read_config(PeopleSimParams)
+    grid = map_from_topic() if config.use_map_topic and not config.map_yaml else None
+    node = PeopleSimNode(config, grid=grid)
+    node.setup()
+    return node

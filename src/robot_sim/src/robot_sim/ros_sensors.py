@@ -10,11 +10,12 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Image, JointState, LaserScan
 
 from robot_common.maps import yaw_to_quaternion
+from robot_common.ros_node import read_config
 from robot_sim.building import building_or_map
 from robot_sim.mobile_base import PatrolPath, SensorModel, hall_patrol
 from robot_sim.params import SensorSimParams
 
-__all__ = ["SensorSim", "run_at"]
+__all__ = ["SensorSim", "run_at", "start"]
 
 
 class SensorSim:
@@ -153,3 +154,10 @@ def run_at(rate_hz: float, publish: Callable[[], None]) -> threading.Thread:
     thread = threading.Thread(target=loop, daemon=True)
     thread.start()
     return thread
+
+
+def start() -> SensorSim:
+    """The node's start-up: read its parameters, build it, wire ROS."""
+    sim = SensorSim(read_config(SensorSimParams))
+    sim.setup()
+    return sim

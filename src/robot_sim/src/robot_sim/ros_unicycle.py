@@ -12,11 +12,12 @@ from std_srvs.srv import Trigger, TriggerResponse
 from visualization_msgs.msg import Marker, MarkerArray
 
 from robot_common.maps import quaternion_to_yaw, yaw_to_quaternion
+from robot_common.ros_node import read_config
 from robot_sim.errors import SimError
 from robot_sim.params import UnicycleSimParams
 from robot_sim.scenarios import SimEpisode, load_scenario
 
-__all__ = ["UnicycleSim"]
+__all__ = ["UnicycleSim", "start"]
 
 
 def _pose(target, x, y, yaw):
@@ -167,3 +168,10 @@ class UnicycleSim:
             marker.color.r, marker.color.g, marker.color.b, marker.color.a = red, green, blue, 0.8
             array.markers.append(marker)
         return array
+
+
+def start() -> UnicycleSim:
+    """The node's start-up: read its parameters, build it, wire ROS."""
+    sim = UnicycleSim(read_config(UnicycleSimParams))
+    sim.setup()
+    return sim
