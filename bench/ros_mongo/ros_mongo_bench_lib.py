@@ -340,6 +340,8 @@ def plot_results(results, output: Path):
     if records:
         axes[1].legend(fontsize=8)
     for who, rep in results.get("replay", {}).items():
+        if "all" not in rep:  # the pair ratios
+            continue
         errors = np.sort(np.array(rep["all"]["errors_ms"]))
         if len(errors):
             label = f"{who} (p99 {rep['all']['p99_ms']:.2f} ms)"
