@@ -7,17 +7,20 @@ from typing import Callable, Dict, List, Sequence, Tuple
 
 import yaml
 
-ROOT = Path(__file__).resolve().parent.parent
-EVAL_FILE = ROOT / "bench" / "data" / "region_eval.yaml"
+ROOT = Path(__file__).resolve().parents[2]
+DATA = Path(__file__).resolve().parent / "data"
+# The leave-one-building-out phrase sets (five buildings' label sets; written before any run).
+LOBO_FILE = DATA / "lobo_buildings.yaml"
+EVAL_FILE = DATA / "region_eval.yaml"
 # Phrases over the labels of a real floor (GRASP-ML's Towne/Levine labels): since issue 18 a dev
 # set (the settings are chosen on it and on region_eval.yaml).
-REAL_EVAL_FILE = ROOT / "bench" / "data" / "region_eval_real.yaml"
+REAL_EVAL_FILE = DATA / "region_eval_real.yaml"
 # Issue 18's first held-out test set (149 phrases over the same floor); run once, its misses were
 # read, so since the second round of issue 18 it is a dev set too.
-REAL_TEST_FILE = ROOT / "bench" / "data" / "region_test_real.yaml"
+REAL_TEST_FILE = DATA / "region_test_real.yaml"
 # The held-out test set of issue 18's second round: 168 new phrases over the same floor, written
 # before anything was run on them; never used for a choice (run once, at the end).
-REAL_TEST_2_FILE = ROOT / "bench" / "data" / "region_test_real_2.yaml"
+REAL_TEST_2_FILE = DATA / "region_test_real_2.yaml"
 # Label descriptions (what a visitor's sign says), for label files we cannot edit: by label file.
 DESCRIPTION_FILES = {"towne_levine_labels.json": ROOT / "src" / "region_search" / "config"
                      / "towne_levine_descriptions.yaml"}
@@ -37,6 +40,24 @@ class DescribedLabels(list):
     def __init__(self, names, descriptions=None):
         super().__init__(names)
         self.descriptions = dict(descriptions or {})
+
+
+def load_lobo(path: Path = LOBO_FILE) -> Dict[str, dict]:
+    """{building: {"labels": DescribedLabels, "queries": [{phrase, expected}]}} of the
+    leave-one-building-out file; `expected` [] means no labelled place matches."""
+    data = yaml.safe_load(Path(path).read_text())["buildings"]
+    for name, building in data.items():
+        labels = list(building.get("labels", []))
+        if "labels_file" in building:
+            labels += sorted(json.loads((SHARED_MAPS / building.pop("labels_file")).read_text()))
+        labels += building.pop("extra_labels", [])
+        building["labels"] = DescribedLabels(labels, building.pop("descriptions", {}))
+        for query in building["queries"]:
+            query["split"] = "test"
+            missing = set(query["expected"]) - set(labels)
+            if missing:
+                raise ValueError(f"{path}: {name}: bad query {query} (unknown {missing})")
+    return data
 
 
 def load_eval(path: Path = EVAL_FILE) -> Dict[str, dict]:
@@ -134,15 +155,15 @@ def percentile(values: Sequence[float], q: float) -> float:
 
 
 def fresh_process_load_seconds(**config) -> dict:
-    """Load an embedding backend (region_search.backends.BackendConfig(**config)) in a
+    """Load an embedding backend (region_search.backends.EmbeddingServerParams(**config)) in a
     new Python process, imports included, and embed one phrase: what a node's start-up costs.
     Returns {"seconds": total, "load_seconds": the loader's own time, "backend": served, "note"}."""
     import subprocess
     import sys
 
     code = ("import json, sys, time; t = time.monotonic();"
-            "from region_search.backends import BackendConfig, load_backend;"
-            "b = load_backend(BackendConfig(**json.loads(sys.argv[1])));"
+            "from region_search.backends import EmbeddingServerParams, load_backend;"
+            "b = load_backend(EmbeddingServerParams(**json.loads(sys.argv[1])));"
             "b.embeddings.embed_phrases(['water fountain']);"
             "print(json.dumps({'seconds': time.monotonic() - t, 'load_seconds': b.load_seconds,"
             " 'backend': b.backend, 'note': b.note}))")

@@ -27,7 +27,8 @@ from region_search.text_similarity import spoken_numbers
     ("go to three-two-one", "go to 321"),
     ("three twentyone", "321"),
     ("two hundred", "200"),
-    ("four oh four", "four oh four"),   # "oh" is not read as zero
+    ("four oh four", "404"), ("room three oh four", "room 304"),  # "oh": a zero inside
+    ("oh no", "oh no"),
     ("one of the labs", "one of the labs"),   # a single number word stays a word
     ("twenty", "twenty"),
     ("two and three", "two and three"),   # "and" only inside "... hundred and ..."

@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from region_search.backends import BackendConfig, load_backend
+from region_search.backends import EmbeddingServerParams, load_backend
 from region_search.corpora import WordNet
 from region_search.errors import EmbeddingError, EmptyPhraseError, ModelError
 from region_search.phrase import PhraseRegionRecommender
@@ -152,19 +152,20 @@ def test_backend_falls_back_to_word2vec_and_says_why(tmp_path):
     (tmp_path / "vectors.txt").write_text(VECTORS)
     word2vec = dict(source="pretrained", pretrained_path=str(tmp_path / "vectors.txt"),
                     cache_dir=str(tmp_path / "cache"), remove_components=-1)
-    loaded = load_backend(BackendConfig(model_path=str(tmp_path), **word2vec))
+    loaded = load_backend(EmbeddingServerParams(model_path=str(tmp_path), **word2vec))
     assert loaded.backend == "word2vec" and loaded.embeddings.backend == "word2vec"
     assert loaded.note.startswith("fallback to word2vec: sentence model unavailable: ")
     assert f"{tmp_path} holds no sentence-transformers model" in loaded.note
     scores, _ = loaded.embeddings.similarity("the lift", ["water fountain", "elevator"])
     assert scores[1] > scores[0]
     with pytest.raises(ModelError, match=r"sentence model unavailable \(fallback disabled\)"):
-        load_backend(BackendConfig(model_path=str(tmp_path), fallback=False, **word2vec))
-    explicit = load_backend(BackendConfig(backend="word2vec", model_path=str(tmp_path / "vectors.txt"),
-                                          cache_dir=str(tmp_path / "cache"), remove_components=-1))
+        load_backend(EmbeddingServerParams(model_path=str(tmp_path), fallback=False, **word2vec))
+    explicit = load_backend(EmbeddingServerParams(
+        backend="word2vec", model_path=str(tmp_path / "vectors.txt"),
+        cache_dir=str(tmp_path / "cache"), remove_components=-1))
     assert explicit.backend == "word2vec" and explicit.note == "" and len(explicit.embeddings) == 4
     with pytest.raises(ModelError, match="unknown embedding backend 'glove'"):
-        load_backend(BackendConfig(backend="glove"))
+        load_backend(EmbeddingServerParams(backend="glove"))
 
 
 BLOCK_TORCH = """
@@ -178,9 +179,9 @@ class NoTorch:  # an import hook that finds no torch, as on a machine without Py
 
 
 sys.meta_path.insert(0, NoTorch())
-from region_search.backends import BackendConfig, load_backend
+from region_search.backends import EmbeddingServerParams, load_backend
 
-b = load_backend(BackendConfig(source="pretrained", pretrained_path=sys.argv[1],
+b = load_backend(EmbeddingServerParams(source="pretrained", pretrained_path=sys.argv[1],
                                cache_dir=sys.argv[2], remove_components=-1))
 print(json.dumps({"backend": b.backend, "note": b.note, "torch": "torch" in sys.modules}))
 """

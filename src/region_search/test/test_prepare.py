@@ -49,8 +49,8 @@ def test_progress_estimates_the_training_time_from_the_corpus_then_from_the_epoc
 
 
 def test_prepare_options_are_the_servers_parameters_with_word2vec_by_default():
-    config = parse_config(["--cache_dir", "/tmp/x", "--epochs", "3"])
-    assert (config.backend, config.cache_dir, config.epochs) == ("word2vec", "/tmp/x", 3)
+    config = parse_config(["--cache_dir", "cache-folder", "--epochs", "3"])
+    assert (config.backend, config.cache_dir, config.epochs) == ("word2vec", "cache-folder", 3)
     assert parse_config(["--backend", "sentence"]).backend == "sentence"
     with pytest.raises(ConfigError, match="epochs must be >= 1, got 0"):
         parse_config(["--epochs", "0"])

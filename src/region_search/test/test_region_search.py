@@ -67,10 +67,11 @@ def wait_for_model(rospy_node, timeout):
 
 
 def start_region_search(roslaunch, rospy_node, files, **args):
-    """region_search.launch serving the hand-made word2vec space (unless `args` say otherwise)."""
+    """region_search.launch serving the hand-made word2vec space (unless `args` say otherwise);
+    the no-match margin belongs to real models' scores, so these always rank."""
     settings = dict(backend="word2vec", source="pretrained",
                     pretrained_path=str(files / "vectors.txt"), cache_dir=str(files / "cache"),
-                    remove_components=-1)
+                    remove_components=-1, answer_no_match="false")
     settings.update(args)
     launch = roslaunch("region_search", "region_search.launch", **settings)
     launch.wait_for_services(SERVICES, timeout=90)
@@ -95,7 +96,7 @@ def test_phrases_find_their_labelled_regions_with_positions(roslaunch, rospy_nod
         assert pose.orientation.w == 1.0 and response.frame_id == "map"
         assert list(response.sources) == ["label_file"] * 2
         assert response.backend == "word2vec" and response.backend_note == ""
-        assert "(word ranking, word2vec backend)" in response.message
+        assert "(word2vec backend)" in response.message
     default = recommend(phrase="printerz", top_k=0)
     assert default.success and len(default.labels) == 3  # ~top_k of config/region_search.yaml
     assert default.labels[0] == "printer_room"
@@ -191,13 +192,17 @@ def test_the_default_sentence_backend_ranks_phrases_through_the_services(roslaun
         pose = response.poses[0]
         assert (pose.position.x, pose.position.y) == pytest.approx(building.labels[best], abs=1e-3)
         assert response.backend == "sentence" and response.backend_note == ""
-        assert "(phrase ranking, sentence backend)" in response.message
-        assert response.explanations[0].startswith("phrase cosine ")
+        assert "(sentence backend)" in response.message
+        assert response.matched and response.explanations[0].startswith("evidence: name ")
     typo = recommend(phrase="the printerz room", top_k=1)
     assert typo.labels[0] == "printer_room" and list(typo.oov_words) == ["printerz"]
     assert "word pieces 'printer' + '##z'" in typo.fallbacks[0]
     empty = recommend(phrase=" ", top_k=1)
     assert not empty.success and "has no words" in empty.message
+    # A place the building has no label for: no forced top-1 (the building has no garage)
+    nothing = recommend(phrase="the parking garage", top_k=3)
+    assert nothing.success and not nothing.matched and list(nothing.labels) == []
+    assert nothing.message.startswith("no labelled place matches 'the parking garage' (closest: ")
     embed = rospy_node.ServiceProxy("/embedding_server/embed", Embed)(
         phrases=["water fountain", "drinking fountain", "elevator"])
     assert embed.success and embed.dimension == 384 and embed.backend == "sentence"
@@ -232,7 +237,7 @@ def test_a_missing_sentence_model_falls_back_to_word2vec_or_stops_with_a_clear_e
     response = recommend(phrase="drinking fountain", top_k=1)
     assert response.success and list(response.labels) == ["water_fountain"]
     assert response.backend == "word2vec" and response.backend_note == embed.backend_note
-    assert "(word ranking, word2vec backend)" in response.message
+    assert "(word2vec backend)" in response.message
     assert embed.backend_note in response.message
     wait_until(lambda: "fallback to word2vec: sentence model unavailable" in launch.log_tail(200),
                30, what="the fallback warning in the embedding server's log")
@@ -256,8 +261,14 @@ def test_label_descriptions_from_the_label_file_and_a_descriptions_file(roslaunc
                       ' "place_b": {"x": 2, "y": 2}, "place_c": {"x": 3, "y": 3}}')
     descriptions = files / "descriptions.yaml"
     descriptions.write_text("place_b: the kitchen\nplace_c: a lounge for a nap\n")
+    # Settings for this hand-made space (~ranking_weights_path): the shipped description
+    # offset is in the score units of real models; here a description counts as it is.
+    weights = files / "ranking_weights.yaml"
+    weights.write_text("word2vec:\n  weights: {name: 3.0, expanded: 3.0, spelling: 1.0}\n"
+                       "  description_offset: 0.0\n")
     start_region_search(roslaunch, rospy_node, files, labels_path=str(labels),
-                        descriptions_path=str(descriptions), layer_service="")
+                        descriptions_path=str(descriptions), layer_service="",
+                        ranking_weights_path=str(weights))
     recommend = rospy_node.ServiceProxy("/region_recommender/recommend", RecommendRegion)
     for phrase, best in [("print a poster", "place_a"), ("coffee", "place_b"),
                          ("take a nap", "place_c")]:

@@ -18,12 +18,12 @@ from typing import Dict, Optional, Union
 
 from region_search.embeddings import WordEmbeddings
 from region_search.errors import ModelError
-from region_search.node_config import BACKENDS, BackendConfig
+from region_search.params import BACKENDS, EmbeddingServerParams
 from region_search.progress import LoadProgress
 from region_search.sentence import SentenceEmbeddings, load_sentence_model
 from region_search.training import load_embeddings
 
-__all__ = ["BACKENDS", "BackendConfig", "LoadedBackend", "load_backend"]
+__all__ = ["BACKENDS", "EmbeddingServerParams", "LoadedBackend", "load_backend"]
 
 LOG = logging.getLogger(__name__)
 Embeddings = Union[SentenceEmbeddings, WordEmbeddings]
@@ -40,12 +40,12 @@ class LoadedBackend:
     info: Dict = field(default_factory=dict)
 
 
-def load_backend(config: Optional[BackendConfig] = None, *, progress: bool = False,
+def load_backend(config: Optional[EmbeddingServerParams] = None, *, progress: bool = False,
                  monitor: Optional[LoadProgress] = None) -> LoadedBackend:
-    """The model to serve (default: BackendConfig()); ModelError when it (and its allowed
+    """The model to serve (default: EmbeddingServerParams()); ModelError when it (and its allowed
     fallback) cannot be loaded. `progress`: tqdm bars; `monitor`: follows the loading stages
     and the word2vec training epochs (the caller marks it finished)."""
-    config = config if config is not None else BackendConfig()
+    config = config if config is not None else EmbeddingServerParams()
     if config.backend not in BACKENDS:
         raise ModelError(f"unknown embedding backend {config.backend!r}; use one of {BACKENDS}")
     start = time.monotonic()
@@ -68,11 +68,11 @@ def load_backend(config: Optional[BackendConfig] = None, *, progress: bool = Fal
     return LoadedBackend(embeddings, "word2vec", note, time.monotonic() - start, info)
 
 
-def _word2vec_source(config: BackendConfig, use_model_path: bool) -> str:
+def _word2vec_source(config: EmbeddingServerParams, use_model_path: bool) -> str:
     return "pretrained" if use_model_path and config.model_path else config.source
 
 
-def _load_word2vec(config: BackendConfig, *, use_model_path: bool, progress: bool,
+def _load_word2vec(config: EmbeddingServerParams, *, use_model_path: bool, progress: bool,
                    monitor: Optional[LoadProgress] = None):
     source = _word2vec_source(config, use_model_path)
     path = config.model_path if use_model_path and config.model_path else config.pretrained_path

@@ -118,6 +118,8 @@ class Synset(NamedTuple):
     definition: str
     examples: Tuple[str, ...]
     derived: Tuple[Tuple[str, int], ...]  # (pos, offset) of derivationally related synsets
+    lexname: int = 0  # lexicographer file number (nouns: 6 artifact, 15 location, 18 person ...)
+    hypernyms: Tuple[Tuple[str, int], ...] = ()  # (pos, offset) of its hypernyms (instance too)
 
 
 class WordNet:
@@ -136,6 +138,7 @@ class WordNet:
         self._index: Optional[Dict[str, Dict[str, List[int]]]] = None
         self._exceptions: Optional[Dict[str, Dict[str, List[str]]]] = None
         self._cache: Dict[Tuple[str, int], Synset] = {}
+        self._compounds: Optional[Dict[str, List[str]]] = None
 
     def data_files(self) -> List[Path]:
         return [self.directory / f"data.{name}" for name in POS_FILES.values()]
@@ -170,6 +173,19 @@ class WordNet:
                 stream.seek(offset)  # a synset's offset is its byte offset in the data file
                 self._cache[key] = _parse_synset(stream.readline().decode("utf-8", "replace"))
         return self._cache[key]
+
+    def compounds(self, word: str) -> List[str]:
+        """Noun lemmas of two or more words that contain `word` as one of them ("break" ->
+        "coffee_break", "lunch_break", ...), in index order."""
+        if self._compounds is None:
+            table: Dict[str, List[str]] = {}
+            for lemma in self._load_index()["n"]:
+                parts = lemma.split("_")
+                if len(parts) > 1:
+                    for part in dict.fromkeys(parts):
+                        table.setdefault(part, []).append(lemma)
+            self._compounds = table
+        return list(self._compounds.get(word.lower(), []))
 
     def morphy(self, word: str, pos: str = "n") -> List[str]:
         """Base forms of `word` that WordNet knows (exceptions, then suffix rules), as morphy."""
@@ -226,15 +242,19 @@ def _parse_synset(line: str) -> Synset:
     lemmas = tuple(_strip_marker(fields[4 + 2 * i]) for i in range(count))
     cursor = 4 + 2 * count
     pointer_count = int(fields[cursor])
-    derived = []
+    derived, hypernyms = [], []
     for i in range(pointer_count):
         symbol, target, target_pos = fields[cursor + 1 + 4 * i: cursor + 4 + 4 * i]
+        pointer = ("a" if target_pos == "s" else target_pos, int(target))
         if symbol == "+":
-            derived.append(("a" if target_pos == "s" else target_pos, int(target)))
+            derived.append(pointer)
+        elif symbol in ("@", "@i"):
+            hypernyms.append(pointer)
     parts = [part.strip() for part in gloss.strip().split(";")]
     definition = "; ".join(p for p in parts if not p.startswith('"'))
     examples = tuple(p.strip('"') for p in parts if p.startswith('"'))
-    return Synset(pos, offset, lemmas, definition, examples, tuple(derived))
+    return Synset(pos, offset, lemmas, definition, examples, tuple(derived), int(fields[1]),
+                  tuple(hypernyms))
 
 
 def _strip_marker(lemma: str) -> str:

@@ -1,15 +1,17 @@
 """Errors of region search: the embedding models, the corpora and the region recommender
 (no rospy here).
 
-`EmbeddingError` is the package's base error; service handlers turn it into `success=False`
-and a message, the node executables into one FATAL line and exit status 1.
+`EmbeddingError` is the package's base error (a `robot_common.errors.WorkspaceError`); service
+handlers turn it into `success=False` and a message, the node executables into one FATAL line and
+exit status 1. Bad node parameters raise `robot_common.errors.ConfigError`.
 """
+from robot_common.errors import WorkspaceError
 
 __all__ = ["EmbeddingError", "EmptyPhraseError", "ModelError", "CorpusError", "LabelFileError",
            "EmbeddingUnavailableError", "ModelLoadingError"]
 
 
-class EmbeddingError(Exception):
+class EmbeddingError(WorkspaceError):
     """Base class of the region-search errors (embeddings, corpora, labels)."""
 
 

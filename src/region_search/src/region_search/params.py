@@ -1,8 +1,8 @@
 """The parameters of the two region-search nodes (robot_common.params classes; no rospy here).
 
-- `BackendConfig`: the embedding_server's parameters, which are also what `backends.load_backend`
+- `EmbeddingServerParams`: the embedding_server's parameters, which are also what `backends.load_backend`
   loads (config/embeddings.yaml is generated from it).
-- `RegionRecommenderConfig`: the region_recommender's parameters (config/region_search.yaml).
+- `RegionRecommenderParams`: the region_recommender's parameters (config/region_search.yaml).
 
 Each default is written once: here, except the word2vec hyper-parameters, whose defaults are
 those of the trainer (`training.Word2VecParams`) and are only referred to here. Regenerate the
@@ -14,15 +14,14 @@ from region_search.corpora import DEFAULT_WORDNET_DIR
 from region_search.training import SOURCES, Word2VecParams
 from robot_common.params import NodeConfig, param
 
-__all__ = ["BACKENDS", "RANKING_METHODS", "BackendConfig", "RegionRecommenderConfig"]
+__all__ = ["BACKENDS", "EmbeddingServerParams", "RegionRecommenderParams"]
 
 BACKENDS = ("sentence", "word2vec")
-RANKING_METHODS = ("auto", "phrase", "word")
 _WORD2VEC = Word2VecParams()
 
 
 @dataclass
-class BackendConfig(NodeConfig):
+class EmbeddingServerParams(NodeConfig):
     """What the embedding server serves (its ~parameters; see the module docstring)."""
 
     backend: str = param("sentence", "sentence: the pretrained sentence model (phrase vectors); "
@@ -70,7 +69,7 @@ class BackendConfig(NodeConfig):
 
 
 @dataclass
-class RegionRecommenderConfig(NodeConfig):
+class RegionRecommenderParams(NodeConfig):
     """The region recommender's ~parameters (see the module docstring)."""
 
     labels_path: str = param("", "map_labelling JSON label file; re-read when it changes")
@@ -89,12 +88,11 @@ class RegionRecommenderConfig(NodeConfig):
     layer_period: float = param(2.0, "seconds between queries of the regions layer", minimum=0.0)
     use_wordnet: bool = param(True, "expand labels with their WordNet words")
     wordnet_dir: str = param(DEFAULT_WORDNET_DIR, "Debian wordnet-base files")
-    method: str = param("auto", "ranking: phrase (cosine of phrase vectors), word (word by word), "
-                        "auto = phrase with the sentence backend, else word",
-                        choices=RANKING_METHODS)
-    expand_query: bool = param(False, "word method: also match query words through their WordNet "
-                               "words")
-    hubness: bool = param(True, "word method: subtract each label's mean match with the other "
-                          "labels' words")
+    ranking_weights_path: str = param("", "YAML file of the ranking settings per backend "
+                                      "(evidence weights, description offset, no-match "
+                                      "threshold); '' = the shipped region_search/ranking_weights.yaml")
+    answer_no_match: bool = param(True, "answer 'no labelled place matches' (no labels) when the "
+                                  "best score is below the no-match threshold; false: always "
+                                  "rank")
     top_k: int = param(3, "regions returned when a request asks for 0", minimum=1)
     frame_id: str = param("map", "frame of the label positions")

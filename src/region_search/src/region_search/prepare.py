@@ -4,7 +4,7 @@ model loads), so that the embedding server's first start on a robot is a warm st
     python -m region_search.prepare [--backend word2vec] [--cache_dir DIR] [--source auto] ...
     rosrun region_search prepare_embeddings [same options]
 
-Every option is an embedding_server parameter (region_search.node_config.BackendConfig, same
+Every option is an embedding_server parameter (region_search.params.EmbeddingServerParams, same
 names and defaults; values are read as YAML like `rosparam set`), so the model prepared is the one
 the server with those parameters loads: word2vec models are cached per corpus contents +
 parameters + gensim version under `cache_dir` ("" = ~/.cache/robot_ws/embeddings, or
@@ -22,18 +22,18 @@ import yaml
 
 from region_search.backends import load_backend
 from region_search.errors import EmbeddingError
-from region_search.node_config import BackendConfig
+from region_search.params import EmbeddingServerParams
 from robot_common.errors import ConfigError
 
 __all__ = ["main", "parse_config"]
 
 
-def parse_config(argv: Optional[List[str]] = None) -> BackendConfig:
-    """The BackendConfig of the command line (ConfigError naming a bad value)."""
+def parse_config(argv: Optional[List[str]] = None) -> EmbeddingServerParams:
+    """The EmbeddingServerParams of the command line (ConfigError naming a bad value)."""
     parser = argparse.ArgumentParser(
         prog="python -m region_search.prepare",
         description="Train (or check) the embedding server's model ahead of time, into its cache.")
-    for name, default, doc in BackendConfig.describe():
+    for name, default, doc in EmbeddingServerParams.describe():
         shown = "word2vec" if name == "backend" else default
         parser.add_argument(f"--{name}", default=None, metavar="VALUE",
                             help=f"{doc} (default: {shown!r})")
@@ -48,7 +48,7 @@ def parse_config(argv: Optional[List[str]] = None) -> BackendConfig:
             if name in ("cache_dir", "model_path", "pretrained_path", "brown_path", "wordnet_dir",
                         "source", "backend"):
                 values[name] = str(value)
-    return BackendConfig.from_mapping(values)
+    return EmbeddingServerParams.from_mapping(values)
 
 
 def main(argv: Optional[List[str]] = None) -> int:

@@ -241,10 +241,16 @@ class RankedRegion:
 
 @dataclass
 class Recommendation:
+    """Ranked regions for a phrase. `matched` False: no labelled place matches the phrase
+    (`results` empty; `closest` holds the best-scoring region anyway, `best_score` its score)."""
+
     phrase: str
     results: List[RankedRegion]
     oov_words: List[str] = field(default_factory=list)
     fallbacks: List[str] = field(default_factory=list)
+    matched: bool = True
+    best_score: float = float("nan")
+    closest: List[RankedRegion] = field(default_factory=list)
 
 
 class RegionRecommender:

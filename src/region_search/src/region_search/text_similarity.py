@@ -12,7 +12,8 @@
 - `spoken_numbers("room three eleven")` -> "room 311": numbers said as words (two or more number
   words in a row, or a run with "hundred") become digits, as people say room numbers: digit by
   digit ("three one one"), in pairs ("three eleven", "three twenty-one") or in full ("three
-  hundred and eleven"). A single number word ("one of the labs") is left as it is.
+  hundred and eleven"), with "oh" for a zero inside ("three oh four" -> 304). A single number
+  word ("one of the labs") is left as it is.
 """
 import re
 from collections import defaultdict
@@ -148,6 +149,7 @@ _TENS = {w: 10 * i for i, w in enumerate(
 # "twentyone": a tens word and a digit written together
 _DIGIT_WORDS = "|".join(w for w, v in _UNITS.items() if 1 <= v <= 9)
 _JOINED = re.compile(rf"^({'|'.join(_TENS)})({_DIGIT_WORDS})$")
+_ZERO_WORDS = ("oh", "o")  # "three oh four": zero said as a letter, inside a number only
 _WORD_OR_GAP = re.compile(r"[A-Za-z]+|[^A-Za-z]+")
 _NUMBER_GAP = re.compile(r"^[ \t-]+$")  # what may separate number words: spaces, hyphens
 
@@ -183,6 +185,8 @@ def _groups(words: List[str]) -> Optional[str]:
                 digits += str(_TENS[word])
         elif word in _UNITS:
             digits += str(_UNITS[word])
+        elif word in _ZERO_WORDS:
+            digits += "0"
         else:
             return None
         index += 1
@@ -205,7 +209,9 @@ def spoken_numbers(text: str) -> str:
         run, end, cursor = [parts[index].lower()], index + 1, index + 1
         while cursor + 1 < len(parts) and _NUMBER_GAP.match(parts[cursor]):
             word = parts[cursor + 1].lower()
-            if _number_word(word) or (word == "and" and "hundred" in run
+            if _number_word(word) or (word in _ZERO_WORDS and cursor + 3 < len(parts)
+                                      and _number_word(parts[cursor + 3])) or (
+                    word == "and" and "hundred" in run
                                       and cursor + 3 < len(parts)
                                       and _number_word(parts[cursor + 3])):
                 run.append(word)

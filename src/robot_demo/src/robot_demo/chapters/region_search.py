@@ -8,7 +8,7 @@ from robot_sim.building import generate_building
 TITLE = "Where is ...? Phrases to labelled regions (embedding_server + region_recommender)"
 PHRASES = ["drinking fountain", "somewhere to print a poster", "I need coffee",
            "a place to take a nap", "classroom 102", "wash my hands", "where are the microscopes",
-           "meeting room", "a snack", "the printerz room"]
+           "meeting room", "a snack", "the printerz room", "the parking garage"]
 
 
 def run(demo) -> None:
@@ -56,10 +56,12 @@ def run(demo) -> None:
         ranked = ", ".join(f"{label} {score:.2f} ({pose.position.x:.1f}, {pose.position.y:.1f})"
                            for label, score, pose in zip(response.labels, response.scores,
                                                          response.poses))
-        print(f"  {phrase!r:30s} -> {ranked}   [{took:.1f} ms]")
+        print(f"  {phrase!r:30s} -> {ranked if response.matched else response.message}   "
+              f"[{took:.1f} ms]")
         if response.fallbacks:
             print(f"  {'':30s}    out of vocabulary: {'; '.join(response.fallbacks)}")
-    print(f"  why the first one won: {recommend(phrase=PHRASES[0], top_k=1).explanations[0]}")
+    first = recommend(phrase=PHRASES[0], top_k=1)
+    print(f"  why the first one won: {first.explanations[0] if first.matched else first.message}")
     empty = recommend(phrase="", top_k=3)
     print(f"  ''{'':28s} -> success={empty.success}: {empty.message}")
     similarity = rospy.ServiceProxy("/embedding_server/similarity", PhraseSimilarity)

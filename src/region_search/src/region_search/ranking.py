@@ -1,0 +1,420 @@
+"""Ranking labelled places for a phrase from several kinds of evidence, with "no place matches".
+
+Each label gets one row of evidence (`FEATURES`) for a phrase:
+
+- `name`: similarity of the phrase with the label's name ("printer room");
+- `knowledge`: with what WordNet says the kind of place is for (knowledge.PlaceKnowledge.text:
+  "printer room: an output device that prints ...");
+- `expanded`: with the name and its WordNet words (synonyms, related words, definitions);
+- `compounds`: the best similarity with one of WordNet's compound nouns that contain a word of
+  the label, with its definition ("coffee break: a short break from work for refreshments"),
+  among the `compound_keep` closest to the label's own knowledge text (its sense of the word);
+- `spelling`: how much of the phrase spells the label's name, each name word weighted by how
+  specific it is in this label set (a word every label has, such as "room", counts little);
+- `number_match` / `number_mismatch`: the phrase names a number the label carries / the label
+  carries only other numbers (room 321 is not room 312).
+
+The similarities come from the embedding backend: phrase vectors of the sentence model
+(`SentenceFeatures`), or word vectors with the word-by-word method (`WordFeatures`). A label's
+score is the weighted sum of its row (`RankingWeights`, chosen by leave-one-building-out in
+bench/region_search/nlp_region_accuracy.py and shipped in region_search/ranking_weights.yaml).
+
+Descriptions (what a visitor's sign says) never replace a label's own evidence: a described
+label is also scored as if the description were its name, less `description_offset`, and keeps
+the better of the two. So a description adds evidence for its own place only, and only when the
+phrase matches it better than the label's own name and knowledge do; it cannot lower any
+label's score. When the best score is below `no_match_margin`, no labelled place matches.
+"""
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from region_search.corpora import WordNet
+from region_search.embeddings import EmbeddedWords, phrase_tokens
+from region_search.errors import EmbeddingError, LabelFileError
+from region_search.knowledge import PlaceKnowledge
+from region_search.recommender import (
+    ExpansionWeights,
+    LabelExpander,
+    RankedRegion,
+    Recommendation,
+    Region,
+    RegionRecommender,
+    descriptions_of,
+)
+from region_search.text_similarity import (
+    STOPWORDS,
+    content_words,
+    is_number,
+    spelling_similarity,
+    spoken_numbers,
+    tokenize,
+)
+
+__all__ = ["FEATURES", "RankingWeights", "load_ranking_weights", "DEFAULT_WEIGHTS_PATH",
+           "QueryEvidence", "SentenceFeatures", "WordFeatures", "PlaceRecommender",
+           "specific_spelling"]
+
+FEATURES = ("name", "knowledge", "expanded", "compounds", "spelling", "number_match",
+            "number_mismatch")
+DEFAULT_WEIGHTS_PATH = Path(__file__).resolve().parent / "ranking_weights.yaml"
+Embed = Callable[[List[str]], EmbeddedWords]
+
+
+@dataclass
+class RankingWeights:
+    """How evidence adds up to a label's score, and when nothing matches."""
+
+    weights: Dict[str, float]
+    description_offset: float = 0.0
+    no_match_margin: float = float("-inf")
+    chosen_on: str = ""
+
+    def vector(self) -> np.ndarray:
+        unknown = sorted(set(self.weights) - set(FEATURES))
+        if unknown:
+            raise LabelFileError(f"unknown ranking features {unknown}; known: {FEATURES}")
+        return np.array([float(self.weights.get(name, 0.0)) for name in FEATURES])
+
+    def as_dict(self) -> dict:
+        return {"weights": {k: round(float(v), 4) for k, v in self.weights.items()},
+                "description_offset": round(float(self.description_offset), 4),
+                "no_match_margin": round(float(self.no_match_margin), 4),
+                "chosen_on": self.chosen_on}
+
+
+def load_ranking_weights(backend: str, path="") -> RankingWeights:
+    """The weights of a backend ("sentence" or "word2vec") from a YAML file (default: the
+    shipped region_search/ranking_weights.yaml); LabelFileError when missing or malformed."""
+    import yaml
+
+    path = Path(path) if path else DEFAULT_WEIGHTS_PATH
+    try:
+        data = yaml.safe_load(path.read_text())
+        entry = data[backend]
+        weights = RankingWeights({str(k): float(v) for k, v in entry["weights"].items()},
+                                 float(entry.get("description_offset", 0.0)),
+                                 float(entry.get("no_match_margin", float("-inf"))),
+                                 str(entry.get("chosen_on", "")))
+        weights.vector()
+        return weights
+    except OSError as err:
+        raise LabelFileError(f"cannot read ranking weights {path}: {err.strerror}") from err
+    except (yaml.YAMLError, KeyError, TypeError, ValueError, AttributeError) as err:
+        raise LabelFileError(f"ranking weights {path} have no valid entry for backend "
+                             f"{backend!r}: {err!r}") from err
+
+
+def specific_spelling(words: Sequence[str], name_words: Sequence[str],
+                      specificity: Dict[str, float], min_similarity: float = 0.6) -> float:
+    """Mean over the phrase's words of the best spelling match with a name word, times that
+    name word's specificity in the label set (1: only this label has it); numbers excluded."""
+    names = [w for w in name_words if w not in STOPWORDS and not is_number(w)]
+    words = [w for w in words if not is_number(w)]
+    if not words or not names:
+        return 0.0
+    total = 0.0
+    for word in words:
+        best, token = max((spelling_similarity(word, name), name) for name in names)
+        if best >= min_similarity:
+            total += best * specificity.get(token, 1.0)
+    return total / len(words)
+
+
+def _specificity(label_words: Dict[str, List[str]]) -> Dict[str, float]:
+    """Per name word: log((n + 1) / labels having it) / log(n + 1) over the n labels."""
+    counts: Dict[str, int] = {}
+    for words in label_words.values():
+        for word in set(words):
+            counts[word] = counts.get(word, 0) + 1
+    total = len(label_words)
+    return {w: float(np.log((total + 1) / c) / np.log(total + 1)) for w, c in counts.items()}
+
+
+def _numbers(text: str) -> set:
+    return {t for t in tokenize(text) if is_number(t)}
+
+
+@dataclass
+class QueryEvidence:
+    """A phrase's evidence for each label (rows in `names` order); `described` has the rows
+    with each description taken as its label's name (None when no label has one)."""
+
+    names: List[str]
+    own: np.ndarray
+    described: Optional[np.ndarray]
+    oov: List[str] = field(default_factory=list)
+    notes: List[str] = field(default_factory=list)
+
+
+class _LabelSet:
+    """Label names, descriptions and what both backends derive from them."""
+
+    def __init__(self, wordnet: Optional[WordNet], expansion: ExpansionWeights,
+                 compound_cap: int):
+        self.knowledge = PlaceKnowledge(wordnet) if wordnet is not None else None
+        self.expander = LabelExpander(wordnet, expansion)
+        self.compound_cap = compound_cap
+        self.described: Dict[str, str] = {}
+        self.names: List[str] = []
+        self.specificity: Dict[str, float] = {}
+
+    def update(self, regions: Sequence[Region]) -> List[str]:
+        """Take these regions' labels; returns the labels new or changed since the last call."""
+        described = descriptions_of(regions)
+        changed = [n for n in sorted(described) if self.described.get(n) != described[n]
+                   or n not in self.names]
+        self.described = described
+        self.names = sorted(described)
+        self.specificity = _specificity({n: tokenize(n) for n in self.names})
+        return changed
+
+    def knowledge_text(self, name: str) -> str:
+        return self.knowledge.text(name) if self.knowledge else " ".join(tokenize(name))
+
+    def compound_texts(self, name: str) -> List[str]:
+        return (self.knowledge.compound_texts(name, cap=self.compound_cap)
+                if self.knowledge else [])
+
+    def expanded_text(self, name: str) -> str:
+        tokens = tokenize(name)
+        words = self.expander.expand(name) if self.expander.wordnet is not None else {}
+        extra = sorted((w for w in words if w not in tokens), key=lambda w: (-words[w][0], w))
+        return " ".join(tokens) + (": " + " ".join(extra) if extra else "")
+
+    def lexical(self, phrase: str, name: str, description: str = "") -> Tuple[float, float,
+                                                                               float]:
+        """(spelling, number_match, number_mismatch) of a phrase against a label (its
+        description's words and numbers count as the name's when given)."""
+        words = content_words(phrase)
+        name_words = tokenize(name) + (content_words(description) if description else [])
+        spelled = specific_spelling(words, name_words, self.specificity)
+        numbers, own = _numbers(phrase), _numbers(name) | _numbers(description)
+        shared = bool(numbers & own)
+        return spelled, float(shared), float(bool(numbers and own and not shared))
+
+
+class SentenceFeatures:
+    """Evidence from whole-phrase vectors (the sentence backend's `embed_phrases`)."""
+
+    def __init__(self, embed_phrases: Embed, wordnet: Optional[WordNet] = None, *,
+                 expansion: ExpansionWeights = ExpansionWeights(), compound_cap: int = 80,
+                 compound_keep: int = 10):
+        self.embed_phrases = embed_phrases
+        self.compound_keep = compound_keep
+        self.labels = _LabelSet(wordnet, expansion, compound_cap)
+        self._vectors: Dict[str, Dict[str, np.ndarray]] = {}
+
+    def set_regions(self, regions: Sequence[Region]) -> None:
+        for name in self.labels.update(regions):
+            description = self.labels.described[name]
+            texts = {"name": [" ".join(tokenize(name))],
+                     "knowledge": [self.labels.knowledge_text(name)],
+                     "expanded": [self.labels.expanded_text(name)],
+                     "compounds": self.labels.compound_texts(name)}
+            if description:
+                texts["described"] = [f"{' '.join(tokenize(name))}, {description}"]
+            flat = [t for group in texts.values() for t in group]
+            vectors = np.asarray(self.embed_phrases(flat).vectors, dtype=np.float64)
+            if len(vectors) != len(flat):
+                raise EmbeddingError(f"{len(flat)} label texts gave {len(vectors)} vectors")
+            start, own = 0, {}
+            for key, group in texts.items():
+                own[key] = vectors[start:start + len(group)]
+                start += len(group)
+            own["compounds"] = _closest(own["compounds"], own["knowledge"][0],
+                                        self.compound_keep)
+            self._vectors[name] = own
+
+    def evidence(self, phrase: str) -> QueryEvidence:
+        query = self.embed_phrases([phrase])
+        vector = np.asarray(query.vectors[0], dtype=np.float64)
+        rows, described_rows, any_described = [], [], False
+        for name in self.labels.names:
+            own = self._vectors[name]
+            compounds = float(np.max(own["compounds"] @ vector)) if len(own["compounds"]) else 0.0
+            row = [float(own["name"][0] @ vector), float(own["knowledge"][0] @ vector),
+                   float(own["expanded"][0] @ vector), compounds,
+                   *self.labels.lexical(phrase, name)]
+            rows.append(row)
+            description = self.labels.described[name]
+            if description:
+                any_described = True
+                described_rows.append([float(own["described"][0] @ vector), *row[1:4],
+                                       *self.labels.lexical(phrase, name, description)])
+            else:
+                described_rows.append(row)
+        notes = [n for n in "; ".join(query.notes).split("; ") if n]
+        return QueryEvidence(list(self.labels.names), np.array(rows),
+                             np.array(described_rows) if any_described else None,
+                             list(query.oov), notes)
+
+
+class WordFeatures:
+    """Evidence from word vectors (word2vec): the word-by-word method for names and WordNet
+    words (region_search.recommender), SIF-weighted mean vectors for the knowledge texts."""
+
+    def __init__(self, embed_words: Embed, wordnet: Optional[WordNet] = None, *,
+                 expansion: ExpansionWeights = ExpansionWeights(), compound_cap: int = 80,
+                 compound_keep: int = 10):
+        self.embed_words = embed_words
+        self.compound_keep = compound_keep
+        self.labels = _LabelSet(wordnet, expansion, compound_cap)
+        self._names = RegionRecommender(embed_words, number_words=False)
+        self._expanded = (RegionRecommender(embed_words, wordnet=wordnet, weights=expansion,
+                                            hubness=True, name_text_weight=0.0,
+                                            number_words=False)
+                          if wordnet is not None else self._names)
+        self._described = RegionRecommender(embed_words, number_words=False)
+        self._words: Dict[str, Tuple[Optional[np.ndarray], float]] = {}
+        self._means: Dict[str, Dict[str, np.ndarray]] = {}
+
+    def set_regions(self, regions: Sequence[Region]) -> None:
+        changed = self.labels.update(regions)
+        bare = [Region(name, 0.0, 0.0) for name in self.labels.names]
+        self._names.set_regions(bare)
+        if self._expanded is not self._names:
+            self._expanded.set_regions(bare)
+        self._described.set_regions([Region(n, 0.0, 0.0, description=self.labels.described[n])
+                                     for n in self.labels.names])
+        for name in changed:
+            texts = {"knowledge": [self.labels.knowledge_text(name)],
+                     "compounds": self.labels.compound_texts(name)}
+            self._learn_words([t for group in texts.values() for t in group])
+            means = {key: self._rows(group) for key, group in texts.items()}
+            if len(means["knowledge"]):
+                means["compounds"] = _closest(means["compounds"], means["knowledge"][0],
+                                              self.compound_keep)
+            self._means[name] = means
+
+    def _learn_words(self, texts: Sequence[str]) -> None:
+        missing = sorted({w for t in texts for w in content_words(t)} - set(self._words))
+        if missing:
+            embedded = self.embed_words(missing)
+            for word, vector, weight, found in zip(missing, embedded.vectors, embedded.weights,
+                                                   embedded.found):
+                self._words[word] = (np.asarray(vector, dtype=np.float64) if found else None,
+                                     float(weight))
+
+    def _mean(self, text: str) -> Optional[np.ndarray]:
+        """The SIF-weighted mean of a text's word vectors, unit length (None: no vectors)."""
+        pairs = [self._words[w] for w in content_words(text) if w in self._words]
+        pairs = [(v, a) for v, a in pairs if v is not None]
+        if not pairs:
+            return None
+        total = np.sum([a * v for v, a in pairs], axis=0)
+        norm = np.linalg.norm(total)
+        return total / norm if norm > 0 else None
+
+    def _rows(self, texts: Sequence[str]) -> np.ndarray:
+        means = [m for m in (self._mean(t) for t in texts) if m is not None]
+        return np.array(means) if means else np.zeros((0, 0))
+
+    def evidence(self, phrase: str) -> QueryEvidence:
+        names = self._scores(self._names, phrase)
+        expanded = self._scores(self._expanded, phrase)
+        described = self._scores(self._described, phrase)
+        self._learn_words([phrase])
+        query = self._mean(phrase)
+        query = query if query is not None else np.zeros(0)
+        rows, described_rows, any_described = [], [], False
+        for name in self.labels.names:
+            means = self._means[name]
+            row = [names[name], _cosine(means["knowledge"], query),
+                   expanded[name], _cosine(means["compounds"], query),
+                   *self.labels.lexical(phrase, name)]
+            rows.append(row)
+            description = self.labels.described[name]
+            if description:
+                any_described = True
+                described_rows.append([described[name], *row[1:4],
+                                       *self.labels.lexical(phrase, name, description)])
+            else:
+                described_rows.append(row)
+        embedded = self.embed_words(phrase_tokens(phrase))
+        return QueryEvidence(list(self.labels.names), np.array(rows),
+                             np.array(described_rows) if any_described else None,
+                             list(embedded.oov), [n for n in embedded.notes if n])
+
+    @staticmethod
+    def _scores(recommender: RegionRecommender, phrase: str) -> Dict[str, float]:
+        return {r.region.name: r.score for r in recommender.recommend(phrase, top_k=0).results}
+
+
+def _closest(rows: np.ndarray, anchor: np.ndarray, keep: int) -> np.ndarray:
+    """The `keep` rows most similar to `anchor` (the compounds in the label's own sense:
+    "coffee break" for a break room, not "jailbreak")."""
+    if len(rows) <= keep or rows.shape[1] != anchor.shape[0]:
+        return rows
+    return rows[np.argsort(-(rows @ anchor))[:keep]]
+
+
+def _cosine(rows: np.ndarray, vector: np.ndarray) -> float:
+    if rows.size == 0 or rows.shape[1] != vector.shape[0]:
+        return 0.0
+    return float(np.max(rows @ vector))
+
+
+class PlaceRecommender:
+    """Ranks labelled places by weighted evidence; says when no labelled place matches.
+
+    Args:
+        features: SentenceFeatures or WordFeatures (the embedding backend's evidence).
+        weights: RankingWeights (load_ranking_weights(backend) for the shipped ones).
+        number_words: read numbers said as words as digits ("room three eleven" -> 311).
+    """
+
+    def __init__(self, features, weights: RankingWeights, *, number_words: bool = True):
+        self.features = features
+        self.weights = weights
+        self.number_words = number_words
+        self.regions: List[Region] = []
+
+    def set_regions(self, regions: Sequence[Region]) -> None:
+        """Use these regions from now on (label texts are encoded once)."""
+        self.features.set_regions(regions)
+        self.regions = list(regions)
+
+    def evidence(self, phrase: str) -> QueryEvidence:
+        phrase_tokens(phrase)  # EmptyPhraseError for a phrase without words
+        return self.features.evidence(spoken_numbers(phrase) if self.number_words else phrase)
+
+    def scores(self, evidence: QueryEvidence, *, descriptions: bool = True) -> np.ndarray:
+        """Each label's score (in evidence.names order)."""
+        w = self.weights.vector()
+        own = evidence.own @ w
+        if not descriptions or evidence.described is None:
+            return own
+        return np.maximum(own, evidence.described @ w - self.weights.description_offset)
+
+    def recommend(self, phrase: str, top_k: int = 3) -> Recommendation:
+        """The `top_k` best regions (all when top_k <= 0), best first, or none with
+        `matched` False when the best score's lead over the mean score is below the no-match
+        margin."""
+        evidence = self.evidence(phrase)
+        scores = self.scores(evidence)
+        by_name = dict(zip(evidence.names, scores))
+        ranked = sorted(self.regions, key=lambda r: (-by_name[r.name], r.name, r.x, r.y))
+        best = float(by_name[ranked[0].name]) if ranked else float("-inf")
+        matched = bool(ranked) and best - float(np.mean(scores)) >= self.weights.no_match_margin
+        shown = ranked if top_k <= 0 else ranked[:top_k]
+        results = [RankedRegion(r, float(by_name[r.name]), self._explain(evidence, r.name))
+                   for r in shown]
+        return Recommendation(phrase, results if matched else [], evidence.oov, evidence.notes,
+                              matched=matched, best_score=best,
+                              closest=results[:1] if not matched else [])
+
+    def _explain(self, evidence: QueryEvidence, name: str) -> str:
+        index = evidence.names.index(name)
+        w = self.weights.vector()
+        row = evidence.own[index]
+        parts = [f"{f} {v:.2f}" for f, v, wt in zip(FEATURES, row, w) if v and wt]
+        text = "evidence: " + ", ".join(parts) if parts else "no evidence"
+        if evidence.described is not None:
+            own, via = float(row @ w), float(evidence.described[index] @ w)
+            if via - self.weights.description_offset > own:
+                text += (f"; its description counted ({via:.2f} - "
+                         f"{self.weights.description_offset:.2f} > {own:.2f})")
+        return text
