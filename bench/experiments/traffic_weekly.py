@@ -9,14 +9,14 @@ week's Wednesday and Saturday (5-minute steps) and held-out log-likelihood per c
 Writes artifacts/bench/traffic_weekly.json. The full run takes about 20 minutes here and up to
 11 GB of memory (choosing the week-periodic baselines' settings on 2.8 M rows); --quick, 3 minutes.
 
-  python bench/traffic_weekly.py [--quick] [--views N] [--steps N] [--map SPEC]
+  python bench/experiments/traffic_weekly.py [--quick] [--views N] [--steps N] [--map SPEC]
 """
 import argparse
 import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "traffic_gp"))
 import traffic_common as tc  # noqa: E402
 
 from traffic_gp.model import TrafficGP  # noqa: E402

@@ -12,7 +12,7 @@ import numpy as np
 
 from traffic_gp.baselines import BinnedMean, FreMEn
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 OUT = ROOT / "artifacts" / "bench"
 SHARED_MAPS = Path(os.environ.get("SHARED_DATA_DIR", str(ROOT.parent / "shared" / "data"))) / "maps"
 

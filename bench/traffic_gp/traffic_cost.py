@@ -9,7 +9,7 @@ row per seen cell, and rows are merged per cell and minute of the day (exact for
 before training. Training time = converting and merging the rows + `--steps` SVGP steps; the
 simulation that makes the views is reported apart.
 
-  python bench/traffic_cost.py [--quick] [--steps N]
+  python bench/traffic_gp/traffic_cost.py [--quick] [--steps N]
 """
 import argparse
 import statistics
@@ -51,7 +51,7 @@ def training_runs(sizes, steps: int) -> list:
         simulated = time.perf_counter() - start
         start = time.perf_counter()
         rows = Observations.from_views(sim.cells, views)
-        merged = rows.compress(1 / 60.0, 24.0)
+        merged = rows.compress(1 / 60.0, None)
         prepared = time.perf_counter() - start
         model = TrafficGP(n_steps=steps, progress=True).fit(merged)
         total = prepared + model.train_seconds_
@@ -85,7 +85,7 @@ def cell_size_runs(sizes, steps: int) -> list:
     for cell_size in sizes:
         sim = simulator_for("generated:0", cell_size, seed=1)
         rows = Observations.from_views(sim.cells, weekday_views(sim, 3000, weeks=1))
-        merged = rows.compress(1 / 60.0, 24.0)
+        merged = rows.compress(1 / 60.0, None)
         model = TrafficGP(n_steps=steps).fit(merged)
         queries = CrowdQueries(model, sim.cells)
         predict = timed(lambda q=queries: q.densities([58.8]))

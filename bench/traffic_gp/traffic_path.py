@@ -7,7 +7,7 @@ People met = the true expected people in the cells it passes (and their neighbou
 passes them, plus a Poisson draw of that. Prints the figures and writes
 artifacts/bench/traffic_path.json and a plot.
 
-  python bench/traffic_path.py [--quick]
+  python bench/traffic_gp/traffic_path.py [--quick]
 """
 import argparse
 import sys
@@ -112,7 +112,7 @@ def main(argv=None) -> int:
     print(f"traffic_path: {tc.machine_note()}", flush=True)
     sim, boxes = two_hallway_floor()
     train = weekday_views(sim, views, weeks=2)
-    rows = Observations.from_views(sim.cells, train).compress(1 / 60.0, 24.0)
+    rows = Observations.from_views(sim.cells, train).compress(1 / 60.0, None)
     start = time.perf_counter()
     model = TrafficGP(n_steps=steps, progress=True).fit(rows)
     print(f"  trained on {len(train)} views in {time.perf_counter() - start:.0f} s", flush=True)

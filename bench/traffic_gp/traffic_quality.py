@@ -14,7 +14,7 @@ are chosen by validation log-likelihood on the training data.
 The GP is given the map's cells (`--spatial-inputs auto`: geodesic inputs; `xy` for the kernel
 on map coordinates). Writes artifacts/bench/traffic_quality.json (`--out-name`) and plots.
 
-  python bench/traffic_quality.py [--quick] [--views N] [--steps N] [--maps SPEC ...]
+  python bench/traffic_gp/traffic_quality.py [--quick] [--views N] [--steps N] [--maps SPEC ...]
       [--spatial-inputs auto|xy|geodesic]
 """
 import argparse
@@ -51,7 +51,7 @@ def run_map(spec: str, args) -> dict:
     start = time.perf_counter()
     train_views = weekday_views(sim, args.views, weeks=args.weeks)
     test_views = weekday_views(test_sim, args.test_views, weeks=1, start_week=args.weeks)
-    train = Observations.from_views(sim.cells, train_views).compress(1 / 60.0, 24.0)
+    train = Observations.from_views(sim.cells, train_views).compress(1 / 60.0, None)
     test = Observations.from_views(sim.cells, test_views)
     print(f"  {sim.cells.n_cells} cells; {len(train_views)} training views -> {len(train)} rows; "
           f"{len(test)} test rows ({time.perf_counter() - start:.0f} s)", flush=True)

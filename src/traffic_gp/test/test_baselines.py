@@ -3,9 +3,10 @@ import numpy as np
 import pytest
 
 from robot_common.cells import CellGrid
+from robot_common.errors import ConfigError
 from robot_common.maps import FREE, GridMap
 from traffic_gp.baselines import BinnedMean, FreMEn
-from traffic_gp.errors import ConfigError, NotFittedError
+from traffic_gp.errors import NotFittedError
 from traffic_gp.observations import Observations
 
 

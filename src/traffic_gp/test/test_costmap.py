@@ -4,8 +4,8 @@ import pytest
 
 import traffic_gp.costmap as costmap
 from robot_common.cells import CellGrid
+from robot_common.errors import ConfigError
 from robot_common.maps import FREE, OCCUPIED, UNKNOWN, GridMap
-from traffic_gp.errors import ConfigError
 
 
 def test_costs_scale_with_density_and_saturate_at_95():

@@ -24,7 +24,7 @@ from ros_mongo.replication import (
     CouchDatabase,
     PushReplication,
 )
-from traffic_gp.server_config import ServerConfig
+from traffic_gp.params import TrafficServerParams
 
 NODE = "/traffic_gp"
 LAUNCH = Path(__file__).resolve().parents[1] / "launch" / "traffic_gp.launch"
@@ -89,16 +89,16 @@ def learned(text: str):
 
 
 def test_source_central_needs_a_central_url():
-    assert ServerConfig.from_mapping({}).source == "topic"
-    config = ServerConfig.from_mapping({"source": "central", "central_url": "http://c:5984/fleet"})
+    assert TrafficServerParams.from_mapping({}).source == "topic"
+    config = TrafficServerParams.from_mapping({"source": "central", "central_url": "http://c:5984/fleet"})
     assert (config.source, config.central_url, config.central_topics) == (
         "central", "http://c:5984/fleet", [])
     with pytest.raises(ConfigError, match="central_url"):
-        ServerConfig.from_mapping({"source": "central"})
+        TrafficServerParams.from_mapping({"source": "central"})
     with pytest.raises(ConfigError, match="source"):
-        ServerConfig.from_mapping({"source": "mesh"})
+        TrafficServerParams.from_mapping({"source": "mesh"})
     with pytest.raises(ConfigError) as caught:
-        ServerConfig.from_mapping({"source": "central", "central_url": "couch://u:hunter2@c/fleet"})
+        TrafficServerParams.from_mapping({"source": "central", "central_url": "couch://u:hunter2@c/fleet"})
     assert "hunter2" not in str(caught.value)
 
 

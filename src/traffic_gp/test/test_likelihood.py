@@ -21,7 +21,7 @@ def true_rate(t):
 
 def overdispersed(n, seed):
     rng = np.random.default_rng(seed)
-    x, y, t = rng.uniform(0, 4, n), rng.uniform(0, 4, n), rng.uniform(0, 24, n)
+    x, y, t = rng.uniform(0, 4, n), rng.uniform(0, 4, n), rng.uniform(0, 5 * 24, n)   # 5 days
     rate = true_rate(t) * rng.gamma(TRUE_R, 1.0 / TRUE_R, n)
     return Observations(x, y, t, np.ones(n), rng.poisson(rate))
 
@@ -52,7 +52,8 @@ def test_large_counts_get_quantiles_quickly_and_exactly():
 @pytest.fixture(scope="module")
 def fitted_pair():
     train = overdispersed(6000, seed=1)
-    settings = dict(n_inducing=15, hourly=False, n_steps=600, batch_size=512, random_state=0)
+    settings = dict(n_inducing=15, hourly=False, n_steps=600, batch_size=512, random_state=0,
+                    profile="none", fallback=False, calibrate=False)   # the trained likelihoods
     return (TrafficGP(likelihood="negbin", **settings).fit(train),
             TrafficGP(likelihood="poisson", **settings).fit(train))
 
@@ -88,23 +89,27 @@ def test_the_numpy_posterior_carries_the_dispersion(fitted_pair, tmp_path):
     assert loaded.likelihood == "negbin" and loaded.dispersion_ == negbin.dispersion_
 
 
-def test_training_stops_on_the_held_out_rows_and_keeps_the_best_state():
+EARLY = dict(n_inducing=10, hourly=False, n_steps=1000, batch_size=256, eval_every=10, patience=3,
+             likelihood="negbin", profile="none", fallback=False, calibrate=False, refit_steps=0,
+             random_state=0)
+
+
+def test_training_stops_on_the_held_out_days_and_keeps_the_best_state():
     train = overdispersed(3000, seed=4)
-    model = TrafficGP(n_inducing=10, hourly=False, n_steps=5000, batch_size=256, eval_every=20,
-                      patience=3, random_state=0).fit(train)
-    assert model.stopped_early_ and model.n_steps_ < 5000
-    # the plateau started the anneal (scheduled at step 3000) early, and fit ran it to its end
-    assert model.anneal_start_ is not None and model.anneal_start_ < 3000
-    assert model.n_steps_ >= model.anneal_start_ + 0.4 * 5000
+    model = TrafficGP(**EARLY).fit(train)
+    assert model.stopped_early_ and model.n_steps_ < 1000
+    # the plateau started the anneal (scheduled at step 600) early, and fit ran it to its end
+    assert model.anneal_start_ is not None and model.anneal_start_ < 600
+    assert model.n_steps_ >= model.anneal_start_ + 0.4 * 1000
     assert len(model.validation_loss_) == len(model.eval_steps_) == len(model.elbo_)
     losses, lowest = np.array(model.validation_loss_), min(model.validation_loss_)
     ties = np.nonzero(losses <= lowest + 1e-3 * abs(lowest))[0]    # the documented tie rule
     assert model.best_step_ == model.eval_steps_[ties[-1]]
-    assert model.n_steps_ - model.eval_steps_[int(np.argmin(losses))] >= 3 * 20
-    held_out = train.subset(model._validation_rows)
+    assert model.n_steps_ - model.eval_steps_[int(np.argmin(losses))] >= 3 * 10
+    held_out = train.subset(np.nonzero(train.t >= 4 * 24.0)[0])      # the last of the 5 days
+    assert model.split_["cut_hours"] == 4 * 24.0
     assert -model.score(held_out) == pytest.approx(losses[ties[-1]], rel=1e-3)
-    again = TrafficGP(n_inducing=10, hourly=False, n_steps=5000, batch_size=256, eval_every=20,
-                      patience=3, random_state=0).fit(train)
+    again = TrafficGP(**EARLY).fit(train)
     assert again.n_steps_ == model.n_steps_ and again.validation_loss_ == model.validation_loss_
 
 

@@ -1,43 +1,19 @@
 """TrafficGP (TensorFlow, kept tiny): recovers a known pattern better than the mean baseline,
-handles exposure, warm-starts, saves and loads without training, refuses bad input."""
+handles exposure, warm-starts, saves and loads without training, refuses bad input. The shared
+`small_world` and `fitted` fixtures are in conftest.py."""
 import json
 
 import numpy as np
 import pytest
 
-from robot_sim import generate_building
-from robot_sim.people import PeopleSimulator
+from robot_common.errors import ConfigError
 from traffic_gp.baselines import BinnedMean
-from traffic_gp.errors import ConfigError, ModelFormatError, NotFittedError
+from traffic_gp.errors import ModelFormatError, NotFittedError
 from traffic_gp.model import TrafficGP
 from traffic_gp.observations import Observations
 from traffic_gp.persistence import PARAM_PREFIX, read_header
 from traffic_gp.posterior import PosteriorSnapshot
 from traffic_gp.sim.evaluation import day_times, model_counts, rmse
-
-
-def weekday_views(sim, per_day, days, seed_start=0.0):
-    views = []
-    for day in range(days):
-        week, weekday = divmod(day, 5)
-        views += sim.observe(per_day, robots=2, start=(week * 7 + weekday) * 24.0, hours=24.0,
-                             radius=4.0)
-    return views
-
-
-@pytest.fixture(scope="module")
-def small_world():
-    """A two-room-per-side building in 1 m cells, two weeks of weekday views."""
-    sim = PeopleSimulator.from_building(generate_building(4, rooms_per_side=2), 1.0, seed=5,
-                                        peak_density=0.3)
-    obs = Observations.from_views(sim.cells, weekday_views(sim, 150, 10)).compress(2 / 60.0, 24)
-    return sim, obs
-
-
-@pytest.fixture(scope="module")
-def fitted(small_world):
-    _, obs = small_world
-    return TrafficGP(n_inducing=80, n_steps=250, batch_size=512, random_state=0).fit(obs)
 
 
 def test_recovers_the_true_pattern_better_than_the_mean_per_cell_and_bin(small_world, fitted):
@@ -61,7 +37,8 @@ def test_exposure_means_a_half_seen_cell_counts_half(small_world):
     x, y, t = rng.uniform(0, 4, n), rng.uniform(0, 4, n), rng.uniform(0, 24, n)
     expo = 0.5 * 0.25 * (1 + 10.0 / 20.0) * np.ones(n)
     obs = Observations(x, y, t, expo, rng.poisson(0.8 * expo))
-    model = TrafficGP(n_inducing=10, hourly=False, n_steps=150, batch_size=256).fit(obs)
+    model = TrafficGP(n_inducing=10, hourly=False, n_steps=150, batch_size=256,
+                      likelihood="poisson", profile="none", validation_fraction=0).fit(obs)
     assert model.predict(2.0, 2.0, 12.0)[0] == pytest.approx(0.8, rel=0.15)
 
 
@@ -110,12 +87,12 @@ def test_model_files_of_another_version_or_garbage_are_refused(fitted, tmp_path)
         TrafficGP.load(tmp_path / "missing.npz")
 
 
-def test_bad_use_gives_clear_errors(small_world):
+def test_bad_use_gives_clear_errors(small_world, tmp_path):
     sim, obs = small_world
     with pytest.raises(NotFittedError, match="not fitted"):
         TrafficGP().predict(1.0, 1.0, 1.0)
     with pytest.raises(NotFittedError, match="not fitted"):
-        TrafficGP().save("/tmp/never.npz")
+        TrafficGP().save(tmp_path / "never.npz")
     with pytest.raises(NotFittedError, match="zero observations"):
         TrafficGP().fit(Observations.empty())
     with pytest.raises(ConfigError, match="n_inducing=0"):
@@ -128,7 +105,8 @@ def test_the_weekly_model_tells_days_apart_and_the_daily_one_repeats(small_world
     sim, obs = small_world
     x, y = sim.cells.x[:10], sim.cells.y[:10]
     np.testing.assert_array_equal(fitted.predict(x, y, 10.5), fitted.predict(x, y, 10.5 + 24.0))
-    weekly = TrafficGP(n_inducing=20, weekly=True, n_steps=0).fit(obs)
+    weekly = TrafficGP(n_inducing=20, weekly=True, n_steps=0, likelihood="poisson",
+                       profile="none", fallback=False, calibrate=False).fit(obs)
     assert weekly.period == 168.0
     here = np.array([[5.0, 6.5, 58.5]])
     prior = weekly.model_.kernel(here, here).numpy()[0, 0]
@@ -144,9 +122,12 @@ def test_numpy_posterior_of_a_saved_model_predicts_what_gpflow_predicts(small_wo
     """The snapshot re-implements the SVGP's predictions in NumPy; GPflow is the reference."""
     sim, obs = small_world
     model = {"space x day + space x hour x day": fitted,
-             "space x day": TrafficGP(n_inducing=30, hourly=False, n_steps=40, batch_size=512),
+             "space x day": TrafficGP(n_inducing=30, hourly=False, n_steps=40, batch_size=512,
+                                      likelihood="negbin", profile="none", refit_steps=0),
              "with the weekly terms": TrafficGP(n_inducing=30, weekly=True, n_steps=40,
-                                                batch_size=512)}[layout]
+                                                batch_size=512, likelihood="poisson",
+                                                profile="none", fallback=False,
+                                                calibrate=False, refit_steps=0)}[layout]
     if not hasattr(model, "model_"):
         model.fit(obs)
     snapshot = PosteriorSnapshot.load(model.save(tmp_path / "crowd.npz"))

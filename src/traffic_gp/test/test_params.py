@@ -8,13 +8,13 @@ import robot_common.errors
 from robot_common.errors import ConfigError
 from traffic_gp.baselines import BinnedMean
 from traffic_gp.errors import NotFittedError, TrafficError
-from traffic_gp.server_config import ServerConfig
+from traffic_gp.params import TrafficServerParams
 
 CONFIG_YAML = Path(__file__).resolve().parents[1] / "config" / "traffic_gp.yaml"
 
 
 def test_defaults_are_the_documented_ones():
-    config = ServerConfig.from_mapping({})
+    config = TrafficServerParams.from_mapping({})
     assert (config.map_yaml, config.cell_size, config.model_path) == ("", 0.5, "")
     assert config.utc_offset_hours is None and config.clock == "ros"
     assert (config.min_rows, config.initial_steps, config.wall_value) == (2000, 600, -1)
@@ -24,7 +24,7 @@ def test_defaults_are_the_documented_ones():
 @pytest.mark.parametrize("value, expected", [("", None), ("local", None), (None, None), (0, 0.0),
                                              (2, 2.0), (-3.5, -3.5), ("1.5", 1.5)])
 def test_utc_offset_accepts_the_local_zone_spellings_and_numbers(value, expected):
-    assert ServerConfig.from_mapping({"utc_offset_hours": value}).utc_offset_hours == expected
+    assert TrafficServerParams.from_mapping({"utc_offset_hours": value}).utc_offset_hours == expected
 
 
 @pytest.mark.parametrize("params, match", [
@@ -36,14 +36,18 @@ def test_utc_offset_accepts_the_local_zone_spellings_and_numbers(value, expected
 ])
 def test_bad_parameters_are_refused_with_the_name(params, match):
     with pytest.raises(ConfigError, match=match):
-        ServerConfig.from_mapping(params)
+        TrafficServerParams.from_mapping(params)
 
 
 def test_the_config_file_is_generated_from_the_class():
-    assert CONFIG_YAML.read_text() == ServerConfig.render_yaml(CONFIG_YAML.read_text().splitlines()[0][2:])
+    title = CONFIG_YAML.read_text().splitlines()[0][2:]
+    assert CONFIG_YAML.read_text() == TrafficServerParams.render_yaml(title)
 
 
-def test_not_fitted_is_both_ours_and_the_workspace_convention():
+def test_errors_follow_the_workspace_convention():
     with pytest.raises(robot_common.errors.NotFittedError):
         BinnedMean(cells=None).predict(0.0, 0.0, 0.0)
     assert issubclass(NotFittedError, TrafficError)
+    assert issubclass(TrafficError, robot_common.errors.WorkspaceError)
+    import traffic_gp.errors
+    assert not hasattr(traffic_gp.errors, "ConfigError")      # the workspace's one ConfigError

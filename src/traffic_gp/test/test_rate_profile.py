@@ -4,7 +4,8 @@ cannot share learns them through the profile."""
 import numpy as np
 import pytest
 
-from traffic_gp.errors import ConfigError, ModelFormatError
+from robot_common.errors import ConfigError
+from traffic_gp.errors import ModelFormatError
 from traffic_gp.model import TrafficGP
 from traffic_gp.observations import Observations
 from traffic_gp.posterior import PosteriorSnapshot
@@ -66,12 +67,12 @@ def two_places(weeks=3, seed=0):
     morning, evening = np.exp(-0.5 * ((day - 8) / 1.5) ** 2), np.exp(-0.5 * ((day - 18) / 1.5) ** 2)
     rate = np.where(x == 0.0, 5 + 200 * morning + 20 * evening, 5 + 20 * morning + 200 * evening)
     counts = rng.poisson(rate * rng.gamma(20.0, 1 / 20.0, rate.size))
-    return Observations(x, np.zeros_like(x), np.mod(t, 168.0), np.ones_like(x), counts), rate
+    return Observations(x, np.zeros_like(x), t, np.ones_like(x), counts), rate
 
 
 def profiled_model(profile):
     return TrafficGP(n_inducing=20, hourly=False, n_steps=150, batch_size=256, profile=profile,
-                     spatial_lengthscale=30.0, random_state=0)
+                     likelihood="negbin", weekly=False, spatial_lengthscale=30.0, random_state=0)
 
 
 @pytest.fixture(scope="module")

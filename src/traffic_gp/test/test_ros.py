@@ -51,11 +51,16 @@ def test_learns_from_simulated_robots_and_serves_a_crowd_costmap(roslaunch, rosp
                        model_path=str(model_path))
     launch.wait_for_services([f"{NODE}/predict_count", f"{NODE}/predict_region"], timeout=90)
     count, region = services(rospy)
-    answer = wait_until(lambda: count(10.0, 6.5, rospy.Time(0)).success, 150,
+    # the first fit chooses its settings on the most recent observations (short candidate fits),
+    # compares the baselines and calibrates: on a busy 2-core machine that takes minutes
+    answer = wait_until(lambda: count(10.0, 6.5, rospy.Time(0)).success, 400,
                         what="a first fit from the simulated robots")
     first = count(10.0, 6.5, rospy.Time(0))
     assert answer and first.expected_count >= 0 and first.lower <= first.upper
     assert first.cell_size == pytest.approx(0.5) and rows_received(first.message) >= 1500
+    status = rospy.ServiceProxy(f"{NODE}/status", Trigger)().message
+    assert "model: model of" in status and ("serving" in status), status
+    assert "held-out" in status or "no time-ordered hold-out" in status, status
 
     grid = rospy.wait_for_message("/map", OccupancyGrid, 30)
     crowd = rospy.wait_for_message(f"{NODE}/crowd_costmap", OccupancyGrid, 30)
@@ -85,7 +90,7 @@ def test_learns_from_simulated_robots_and_serves_a_crowd_costmap(roslaunch, rosp
     publisher = rospy.Publisher("/people_counts", PeopleCount, queue_size=1)
     wait_until(lambda: publisher.get_num_connections() > 0, 90, what="a subscriber")
     publisher.publish(bad)
-    wait_until(lambda: "dropped a PeopleCount from 'broken'" in launch.log_tail(400), 90,
+    wait_until(lambda: "dropped a PeopleCount from 'broken'" in launch.log_tail(400), 300,
                what="the malformed message to be reported")
     later = wait_until(lambda: count(10.0, 6.5, rospy.Time(0)), 90, what="an answer")
     assert later.success and rows_received(later.message) > rows_received(first.message)
@@ -101,7 +106,8 @@ def saved_model(tmp_path):
     building = generate_building(0)
     sim = PeopleSimulator.from_building(building, 0.5, seed=2)
     obs = Observations.from_views(sim.cells, sim.observe(300, start=48.0, hours=24.0))
-    model = TrafficGP(n_inducing=30, n_steps=20, batch_size=256).fit(obs)
+    model = TrafficGP(n_inducing=30, n_steps=20, batch_size=256, likelihood="negbin",
+                      profile="none", refit_steps=0).fit(obs)
     return model, model.save(tmp_path / "model.npz"), save_map(building.grid, tmp_path / "map.yaml")
 
 

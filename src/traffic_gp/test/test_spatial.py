@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from robot_common.cells import CellGrid
+from robot_common.errors import ConfigError
 from robot_common.maps import FREE, OCCUPIED, GridMap
-from traffic_gp.errors import ConfigError
 from traffic_gp.geodesic import GeodesicEmbedding, geodesic_distances
 from traffic_gp.model import TrafficGP
 from traffic_gp.observations import Observations
@@ -68,7 +68,8 @@ def test_cells_beside_a_wall_are_far_apart_in_the_embedding_and_near_through_a_d
 def trained():
     cells = corridor_and_rooms()
     obs = corridor_counts(cells)
-    common = dict(n_inducing=60, n_steps=300, batch_size=512, hourly=False, random_state=0)
+    common = dict(n_inducing=60, n_steps=300, batch_size=512, hourly=False, random_state=0,
+                  likelihood="poisson", profile="none", fallback=False, calibrate=False)
     xy = TrafficGP(spatial_inputs="xy", **common).fit(obs, cells=cells)
     geodesic = TrafficGP(spatial_inputs="geodesic", **common).fit(obs, cells=cells)
     return cells, xy, geodesic
@@ -113,6 +114,7 @@ def test_geodesic_inputs_need_the_map():
     with pytest.raises(ConfigError):
         TrafficGP(spatial_inputs="polar", n_inducing=10).fit(obs)
     model = TrafficGP(n_inducing=10, n_steps=2, validation_fraction=0).fit(obs)   # auto, no map
+    assert model.settings_["spatial_inputs"] == "xy"
     assert model.embedding_ is None
 
 

@@ -12,14 +12,15 @@ timed observations as the FreMEn implementation does, with running sums of state
 of the sampling "balance" cos/sin, so that uneven sampling does not fake periodicities; here each
 observation is weighted by its exposure (state = count / exposure).
 """
-from typing import Optional
+from typing import Dict, Optional
 
 import numpy as np
 from scipy import sparse
 
 import traffic_gp.predictive as predictive
 from robot_common.cells import CellGrid
-from traffic_gp.errors import ConfigError, NotFittedError
+from robot_common.errors import ConfigError
+from traffic_gp.errors import NotFittedError
 from traffic_gp.observations import Observations
 
 
@@ -50,10 +51,37 @@ class _CellBaseline:
         mean = np.log(self.predict(obs.x, obs.y, obs.t))
         return float(np.mean(predictive.log_density(obs.count, mean, 0.0, obs.exposure)))
 
+    def to_arrays(self) -> Dict[str, np.ndarray]:
+        """The fitted state as plain arrays (`from_arrays` restores it with the same cells)."""
+        self._check_fitted()
+        arrays = {name: np.asarray(getattr(self, name)) for name in self._STATE}
+        arrays.update(kind=np.array(type(self).__name__), period=np.array(self.period),
+                      floor=np.array(self.floor))
+        return arrays
+
+    @staticmethod
+    def from_arrays(arrays: Dict[str, np.ndarray], cells) -> "_CellBaseline":
+        """A fitted BinnedMean or FreMEn from `to_arrays`, predicting over `cells`."""
+        kind = str(arrays["kind"])
+        classes = {"BinnedMean": BinnedMean, "FreMEn": FreMEn}
+        if kind not in classes:
+            raise ConfigError(f"unknown baseline kind {kind!r}")
+        model = classes[kind].__new__(classes[kind])
+        _CellBaseline.__init__(model, cells, period=float(arrays["period"]),
+                               floor=float(arrays["floor"]))
+        for name in model._STATE:
+            value = np.asarray(arrays[name])
+            setattr(model, name, value.item() if value.ndim == 0 else value)
+        if isinstance(model, FreMEn):           # what only fitting needs
+            model.shortest_period, model.chunk = None, 200000
+        return model
+
 
 class BinnedMean(_CellBaseline):
     """Counts / exposure per cell and time bin of `bin_minutes`; empty bins fall back to the
     cell's mean, unseen cells to the global mean."""
+
+    _STATE = ("global_rate_", "rate_", "bin_minutes")
 
     def __init__(self, cells: CellGrid, *, bin_minutes: float = 10.0, period: float = 24.0,
                  floor: float = 1e-3):
@@ -89,6 +117,8 @@ class BinnedMean(_CellBaseline):
 
 class FreMEn(_CellBaseline):
     """Per-cell mean + `order` strongest harmonics of periods `period`/k down to `shortest_period`."""
+
+    _STATE = ("global_rate_", "mean_", "omega_", "amplitude_", "phase_", "order")
 
     def __init__(self, cells: CellGrid, *, order: int = 3, period: float = 24.0,
                  shortest_period: Optional[float] = 1.0 / 6.0, floor: float = 1e-3,

@@ -17,8 +17,8 @@ import numpy as np
 from scipy import ndimage
 
 from robot_common.cells import CellGrid
+from robot_common.errors import ConfigError
 from robot_common.maps import FREE
-from traffic_gp.errors import ConfigError
 
 MAX_COST = 95
 

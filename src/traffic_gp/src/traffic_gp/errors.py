@@ -1,12 +1,14 @@
 """Errors of the traffic_gp package: one base error, a few specific ones.
 
-`NotFittedError` also derives from `robot_common.errors.NotFittedError` (the workspace's one "not
-fitted" convention), so callers may catch either.
+`TrafficError` derives from `robot_common.errors.WorkspaceError` (the workspace's one root); a bad
+parameter or option is the workspace's `robot_common.errors.ConfigError`; `NotFittedError` also
+derives from `robot_common.errors.NotFittedError`, so callers may catch either.
 """
 from robot_common.errors import NotFittedError as CommonNotFittedError
+from robot_common.errors import WorkspaceError
 
 
-class TrafficError(RuntimeError):
+class TrafficError(WorkspaceError, RuntimeError):
     """Base error of traffic_gp."""
 
 
@@ -20,7 +22,3 @@ class NotFittedError(TrafficError, CommonNotFittedError):
 
 class ModelFormatError(TrafficError):
     """A saved model file is missing, unreadable, of another format version or another structure."""
-
-
-class ConfigError(TrafficError, ValueError):
-    """A hyperparameter or option is out of range."""

@@ -28,7 +28,8 @@ from scipy import ndimage, sparse
 from scipy.sparse import csgraph
 
 from robot_common.cells import CellGrid
-from traffic_gp.errors import ConfigError, ModelFormatError
+from robot_common.errors import ConfigError
+from traffic_gp.errors import ModelFormatError
 
 DEFAULT_DIMS = 6
 DEFAULT_LANDMARKS = 48

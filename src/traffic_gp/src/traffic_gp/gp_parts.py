@@ -203,9 +203,10 @@ def build_model(inducing: np.ndarray, *, spatial_lengthscale: float, hourly: boo
 
 class Trainer:
     """One compiled step: natural gradients for q(u), Adam for the hyperparameters, from a single
-    forward and backward pass (GPflow's two `minimize` calls would need two)."""
+    forward and backward pass (GPflow's two `minimize` calls would need two). `compiled=False`
+    runs the same step eagerly: for a few dozen steps that is quicker than tracing it."""
 
-    def __init__(self, model, *, learning_rate: float, gamma: float):
+    def __init__(self, model, *, learning_rate: float, gamma: float, compiled: bool = True):
         lib = libs()
         tf, gpflow = lib.tf, lib.gpflow
         self._tf = tf
@@ -218,11 +219,14 @@ class Trainer:
         columns = int(model.inducing_variable.Z.shape[1])
         spec = [tf.TensorSpec([None, columns], FLOAT), tf.TensorSpec([None, 2], FLOAT)]
         single_pass = hasattr(self.natgrad, "_natgrad_apply_gradients")  # GPflow 2.9 - 2.11
-        self.step = tf.function(self._step if single_pass else self._two_pass_step,
-                                input_signature=spec)
-        self.elbo = tf.function(lambda X, Y: model.elbo((X, Y)), input_signature=spec)
-        self.log_density = tf.function(lambda X, Y: model.predict_log_density((X, Y)),
-                                       input_signature=spec)
+        step = self._step if single_pass else self._two_pass_step
+        functions = (step, lambda X, Y: model.elbo((X, Y)),
+                     lambda X, Y: model.predict_log_density((X, Y)))
+        if compiled:
+            functions = [tf.function(f, input_signature=spec) for f in functions]
+        else:       # eager: the arrays become tensors of the same types as the signature's
+            functions = [_as_tensors(tf, f) for f in functions]
+        self.step, self.elbo, self.log_density = functions
 
     def _step(self, X, Y):
         model = self.model
@@ -240,6 +244,12 @@ class Trainer:
         loss = self.model.training_loss_closure((X, Y), compile=False)
         self.natgrad.minimize(loss, [(self.model.q_mu, self.model.q_sqrt)])
         self.adam.minimize(loss, self.model.trainable_variables)
+
+
+def _as_tensors(tf, function):
+    def call(X, Y):
+        return function(tf.constant(X, dtype=FLOAT), tf.constant(Y, dtype=FLOAT))
+    return call
 
 
 def predict_latent(model, X: np.ndarray, full_cov: bool = False,

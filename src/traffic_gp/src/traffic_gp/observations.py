@@ -1,11 +1,15 @@
-"""People counts as rows for the models: where (x, y in metres, map frame), when (hours since
-Monday 00:00), how much was watched (`exposure`, effective m^2) and how many people were counted.
+"""People counts as rows for the models: where (x, y in metres, map frame), when (`t`, hours since
+a Monday 00:00, counting on across weeks: 170 is Monday 02:00 of the second week; the models use
+`t` modulo their period, and `fit` holds out the most recent days by it), how much was watched
+(`exposure`, effective m^2) and how many people were counted. `hours_since_monday` turns UNIX
+times into such hours (the node's rows).
 
 A robot's view becomes one row per seen cell (`from_views`), so cells seen empty give rows with
 count 0 while unseen cells give no row at all. A sensor that reports only one total count for
 its whole view gives one row at the centre of the seen area (`aggregate_view`): exact when the
 density is even over the view, an approximation otherwise.
 """
+import datetime
 from dataclasses import dataclass
 from typing import Iterable, Optional, Sequence
 
@@ -15,6 +19,17 @@ from robot_common.cells import DWELL_TIME_S, HOURS_PER_WEEK, CellGrid, View, exp
 from traffic_gp.errors import ObservationError
 
 FIELDS = ("x", "y", "t", "exposure", "count")
+
+
+def hours_since_monday(unix_seconds, utc_offset_hours: Optional[float] = None):
+    """Hours of UNIX times since Monday 1969-12-29 00:00 in the given or the local zone (their
+    remainder modulo 168 is `robot_common.cells.hours_of_week`)."""
+    seconds = np.asarray(unix_seconds, dtype=float)
+    if utc_offset_hours is None:
+        first = float(seconds.ravel()[0]) if seconds.size else 0.0
+        offset = datetime.datetime.fromtimestamp(first).astimezone().utcoffset()
+        utc_offset_hours = offset.total_seconds() / 3600.0 if offset else 0.0
+    return seconds / 3600.0 + utc_offset_hours + 72.0     # 1970-01-01 was a Thursday
 
 
 @dataclass
@@ -91,8 +106,10 @@ class Observations:
                    np.concatenate([v.counts for v in views]),
                    robot=np.repeat([v.robot_id for v in views], sizes))
 
-    def compress(self, time_bin_hours: float, period: float = HOURS_PER_WEEK) -> "Observations":
-        """Sum counts and exposures of rows at the same place in the same time bin.
+    def compress(self, time_bin_hours: float,
+                 period: Optional[float] = HOURS_PER_WEEK) -> "Observations":
+        """Sum counts and exposures of rows at the same place in the same time bin (of the
+        `period`, or of the whole time line with `period=None`, which keeps the time order).
 
         Exact for a Poisson model whose rate is constant within a bin (sums of Poisson counts);
         keeps memory bounded on a robot that watches for months. Robot names are dropped.
@@ -101,7 +118,7 @@ class Observations:
             raise ObservationError(f"time_bin_hours must be positive, got {time_bin_hours}")
         if not len(self):
             return self
-        bins = np.floor(np.mod(self.t, period) / time_bin_hours)
+        bins = np.floor((self.t if period is None else np.mod(self.t, period)) / time_bin_hours)
         keys = np.column_stack([np.round(self.x, 3), np.round(self.y, 3), bins])
         unique, inverse = np.unique(keys, axis=0, return_inverse=True)
         inverse = inverse.ravel()

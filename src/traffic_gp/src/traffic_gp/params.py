@@ -10,7 +10,7 @@ from typing import Any, Mapping, Optional
 
 from robot_common.errors import ConfigError
 from robot_common.params import param
-from ros_mongo.changes import CentralSourceParams
+from ros_mongo.params import CentralSourceParams
 
 __all__ = ["TrafficServerParams", "LOCAL_ZONE"]
 

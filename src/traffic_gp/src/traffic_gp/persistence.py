@@ -5,8 +5,10 @@ parameters, training statistics, library versions, caller metadata such as the m
 trained on), a set of named arrays (the GP parameters in unconstrained form, so that a loaded
 model predicts bit for bit what the saved one did), the arrays of the spatial inputs when the
 model has map-aware ones (`geodesic.GeodesicEmbedding.to_arrays`), the arrays of its rate profile
-(the GP's per-place offset, `rate_profile.RateProfile.to_arrays`) if it has one and, optionally, the training
-rows (so `partial_fit` can continue after loading). This module knows the layout, not the estimators:
+(the GP's per-place offset, `rate_profile.RateProfile.to_arrays`) if it has one and, optionally, the arrays of
+what it serves besides the GP (`serving.Serving.to_arrays`: the places, the per-place choice,
+the baselines) if any and, optionally, the training rows (so `partial_fit` can continue after
+loading). This module knows the layout, not the estimators:
 `TrafficGP.save` / `TrafficGP.load` and `PosteriorSnapshot.load` decide what goes in and what
 comes out. Files are written to a temporary name and renamed: a crash never leaves half a model
 behind. Every read error is a `ModelFormatError` naming the file.
@@ -23,8 +25,8 @@ from traffic_gp.errors import ModelFormatError
 from traffic_gp.observations import FIELDS, Observations
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "PARAM_PREFIX", "DATA_PREFIX", "SPATIAL_PREFIX",
-           "PROFILE_PREFIX", "write_model_file", "read_header", "read_parameters", "read_spatial",
-           "read_profile"]
+           "PROFILE_PREFIX", "SERVING_PREFIX", "write_model_file", "read_header",
+           "read_parameters", "read_spatial", "read_profile", "read_serving"]
 
 FORMAT = "traffic_gp.TrafficGP"
 FORMAT_VERSION = 1
@@ -32,21 +34,24 @@ PARAM_PREFIX = "param:"
 DATA_PREFIX = "data:"
 SPATIAL_PREFIX = "spatial:"
 PROFILE_PREFIX = "profile:"
+SERVING_PREFIX = "serving:"
 
 
 def write_model_file(path, header: dict, parameters: Dict[str, np.ndarray],
                      data: Optional[Observations] = None,
                      spatial: Optional[Dict[str, np.ndarray]] = None,
-                     profile: Optional[Dict[str, np.ndarray]] = None) -> Path:
+                     profile: Optional[Dict[str, np.ndarray]] = None,
+                     served: Optional[Dict[str, np.ndarray]] = None) -> Path:
     """Write `header` (JSON-able; `format`, `format_version` and `saved_at` are added), the named
-    parameter arrays, the spatial-input and rate-profile arrays (if any) and optionally the
-    training rows to `path` (.npz); returns the path."""
+    parameter arrays, the spatial-input, rate-profile and serving arrays (if any) and optionally
+    the training rows to `path` (.npz); returns the path."""
     path = Path(path)
     header = {"format": FORMAT, "format_version": FORMAT_VERSION, **header}
     header.update(format=FORMAT, format_version=FORMAT_VERSION, saved_at=time.time())
     arrays = {PARAM_PREFIX + key: value for key, value in parameters.items()}
     arrays.update({SPATIAL_PREFIX + key: value for key, value in (spatial or {}).items()})
     arrays.update({PROFILE_PREFIX + key: value for key, value in (profile or {}).items()})
+    arrays.update({SERVING_PREFIX + key: value for key, value in (served or {}).items()})
     if data is not None:
         arrays.update({DATA_PREFIX + name: getattr(data, name) for name in FIELDS})
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -76,20 +81,26 @@ def read_parameters(path, *, with_data: bool = False
     return header, values, data
 
 
-def read_spatial(path) -> Dict[str, np.ndarray]:
-    """The spatial-input arrays of a saved model by name (empty: the model works on x, y)."""
+def _prefixed(path, prefix: str) -> Dict[str, np.ndarray]:
     with _open(path) as archive:
         _header(archive, path)
-        return {key[len(SPATIAL_PREFIX):]: archive[key] for key in archive.files
-                if key.startswith(SPATIAL_PREFIX)}
+        return {key[len(prefix):]: archive[key] for key in archive.files
+                if key.startswith(prefix)}
+
+
+def read_spatial(path) -> Dict[str, np.ndarray]:
+    """The spatial-input arrays of a saved model by name (empty: the model works on x, y)."""
+    return _prefixed(path, SPATIAL_PREFIX)
 
 
 def read_profile(path) -> Dict[str, np.ndarray]:
     """The rate-profile arrays of a saved model by name (empty: the model has no offset)."""
-    with _open(path) as archive:
-        _header(archive, path)
-        return {key[len(PROFILE_PREFIX):]: archive[key] for key in archive.files
-                if key.startswith(PROFILE_PREFIX)}
+    return _prefixed(path, PROFILE_PREFIX)
+
+
+def read_serving(path) -> Dict[str, np.ndarray]:
+    """The serving arrays of a saved model by name (empty: the model serves its GP alone)."""
+    return _prefixed(path, SERVING_PREFIX)
 
 
 def _open(path):

@@ -10,7 +10,9 @@ log-likelihoods are those of the saved likelihood. A model with map-aware spatia
 its `geodesic.GeodesicEmbedding` in the file (`persistence.read_spatial`): the snapshot maps
 places to the same inputs; a model with a rate profile (`rate_profile.RateProfile`, the per-place
 offset of the log rate) keeps it in the file too (`persistence.read_profile`) and the snapshot
-adds it as the model does. `LatentPredictions` holds the predictions both `TrafficGP` and the
+adds it as the model does; what the model serves besides its GP (`serving.Serving`: baselines
+at the places where they forecast better, the calibrated interval width) comes along too
+(`persistence.read_serving`). `LatentPredictions` holds the predictions both `TrafficGP` and the
 snapshot derive from the latent Gaussian.
 """
 import re
@@ -20,10 +22,12 @@ import numpy as np
 
 import traffic_gp.predictive as predictive
 from robot_common.cells import HOURS_PER_WEEK
-from traffic_gp.errors import ConfigError, ModelFormatError, NotFittedError
+from robot_common.errors import ConfigError
+from traffic_gp.errors import ModelFormatError, NotFittedError
 from traffic_gp.geodesic import GeodesicEmbedding
-from traffic_gp.persistence import read_parameters, read_profile, read_spatial
+from traffic_gp.persistence import read_parameters, read_profile, read_serving, read_spatial
 from traffic_gp.rate_profile import RateProfile
+from traffic_gp.serving import Serving
 
 JITTER = 1e-6          # GPflow's default jitter on K(Z, Z)
 UNREACHABLE_DENSITY = 1e-6   # people per m^2 where no watched place connects (geodesic inputs)
@@ -36,11 +40,22 @@ class LatentPredictions:
     (None for Poisson counts, r of the negative binomial otherwise), `embedding_` (None:
     the kernel works on x, y; else the `GeodesicEmbedding` giving the spatial inputs; places
     it finds unreachable from every watched place get the log of UNREACHABLE_DENSITY, with no
-    uncertainty: nobody can walk there) and `profile_` (None, or the `RateProfile` whose log
-    rate is added to the GP's latent mean: the GP then models the residual)."""
+    uncertainty: nobody can walk there), `profile_` (None, or the `RateProfile` whose log
+    rate is added to the GP's latent mean: the GP then models the residual) and `serving_`
+    (None, or the `Serving` that puts the baselines' log rates where they are served and widens
+    the Gaussian by the calibrated variance; its dispersion is then the count noise)."""
 
     embedding_: Optional[GeodesicEmbedding] = None
     profile_: Optional[RateProfile] = None
+    serving_: Optional[Serving] = None
+
+    @property
+    def count_dispersion_(self) -> Optional[float]:
+        """The count noise of the served predictions: the calibrated dispersion (None:
+        Poisson) when the interval width was calibrated, else the trained one."""
+        if self.serving_ is not None and self.serving_.calibration is not None:
+            return self.serving_.dispersion
+        return self.dispersion_
 
     def model_inputs(self, x, y, t) -> np.ndarray:
         """The GP's input rows for places (x, y) and times t: the spatial columns (x, y, or the
@@ -65,8 +80,13 @@ class LatentPredictions:
         x, y, t = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (x, y, t)))
         if self.profile_ is not None:
             mean = mean + self.profile_.log_rate(x, y, t)
-        if self.embedding_ is None:
-            return mean, cov
+        if self.embedding_ is not None:
+            mean, cov = self._unreachable(x, y, mean, cov, full_cov)
+        if self.serving_ is not None:
+            mean, cov = self.serving_.apply(x, y, t, mean, cov, full_cov)
+        return mean, cov
+
+    def _unreachable(self, x, y, mean, cov, full_cov: bool):
         away = self.embedding_.unreachable(x, y)
         if away.any():
             mean, cov = mean.copy(), cov.copy()
@@ -95,7 +115,7 @@ class LatentPredictions:
     def predict_interval(self, x, y, t, exposure=1.0, level: float = 0.9):
         """Central `level` predictive interval of the count itself (model + count noise)."""
         mean, var = self.predict_latent(x, y, t)
-        return predictive.interval(level, mean, var, exposure, self.dispersion_)
+        return predictive.interval(level, mean, var, exposure, self.count_dispersion_)
 
     def sample_totals(self, x, y, t, exposure, n_samples: int = 500) -> np.ndarray:
         """Samples of the summed expected count over many cells at one time (joint posterior)."""
@@ -109,7 +129,7 @@ class LatentPredictions:
         """Mean held-out log predictive density of the counts (higher is better)."""
         mean, var = self.predict_latent(obs.x, obs.y, obs.t)
         return float(np.mean(predictive.log_density(obs.count, mean, var, obs.exposure,
-                                                    self.dispersion_)))
+                                                    self.count_dispersion_)))
 
 
 def softplus(x: np.ndarray) -> np.ndarray:
@@ -153,12 +173,15 @@ class PosteriorSnapshot(LatentPredictions):
 
     def __init__(self, header: dict, values: Dict[str, np.ndarray], path: str = "",
                  spatial: Optional[Dict[str, np.ndarray]] = None,
-                 profile: Optional[Dict[str, np.ndarray]] = None):
+                 profile: Optional[Dict[str, np.ndarray]] = None,
+                 served: Optional[Dict[str, np.ndarray]] = None):
         params = header["params"]
+        settings = header.get("settings") or params
         self.embedding_ = GeodesicEmbedding.from_arrays(spatial)
         self.profile_ = RateProfile.from_arrays(profile or {})
+        self.serving_ = Serving.from_arrays(header.get("serving"), served or {})
         self.path, self.header = path, header
-        self.weekly = bool(params.get("weekly", False))
+        self.weekly = settings.get("weekly", False) is True
         self.random_state = params.get("random_state", 0)
         self.n_steps_, self.n_rows_ = header.get("n_steps", 0), header.get("n_rows", 0)
         try:
@@ -172,7 +195,7 @@ class PosteriorSnapshot(LatentPredictions):
             q_mu = np.asarray(values[".q_mu"], float)[:, 0]
             q_sqrt = fill_triangular(np.asarray(values[".q_sqrt"], float))[0]
             self.dispersion_ = None
-            if params.get("likelihood", "poisson") == "negbin":
+            if settings.get("likelihood", "poisson") == "negbin":
                 self.dispersion_ = float(softplus(np.asarray(values[".likelihood.dispersion"],
                                                              float)))
         except (KeyError, IndexError, ValueError) as err:
@@ -187,7 +210,18 @@ class PosteriorSnapshot(LatentPredictions):
     def load(cls, path) -> "PosteriorSnapshot":
         """The posterior of a model file written by `TrafficGP.save` (no TensorFlow)."""
         header, values, _ = read_parameters(path)
-        return cls(header, values, str(path), read_spatial(path), read_profile(path))
+        return cls(header, values, str(path), read_spatial(path), read_profile(path),
+                   read_serving(path))
+
+    def status(self) -> str:
+        """What the saved model chose and serves (as `TrafficGP.status`)."""
+        reason = (self.header.get("selection") or {}).get("reason", "settings as given")
+        text = f"model of {self.n_rows_} rows, {self.n_steps_} steps; {reason}"
+        if self.serving_ is not None:
+            return text + "; " + self.serving_.summary()
+        why = ("no hold-out to compare or calibrate on" if self.header.get("split") is None
+               else "fallback and calibration off")
+        return text + f"; serving the GP as trained ({why})"
 
     @property
     def period(self) -> float:

@@ -11,7 +11,8 @@ import numpy as np
 import traffic_gp.costmap as costmap
 import traffic_gp.predictive as predictive
 from robot_common.cells import CellGrid
-from traffic_gp.errors import ConfigError, TrafficError
+from robot_common.errors import ConfigError
+from traffic_gp.errors import TrafficError
 
 MAX_JOINT_CELLS = 1500   # above this, region sums treat cells as independent
 
@@ -51,7 +52,8 @@ class CrowdQueries:
             raise TrafficError(f"({x:.2f}, {y:.2f}) is not in a free cell of the map")
         cx, cy, area = self.cells.x[index], self.cells.y[index], self.cells.cell_area
         mean, var = self.model.predict_latent(cx, cy, hours)
-        low, high = predictive.interval(self.level, mean, var, area)
+        low, high = predictive.interval(self.level, mean, var, area,
+                                        getattr(self.model, "count_dispersion_", None))
         density = float(predictive.expected_value(mean, var)[0])
         return Estimate(density * area, float(predictive.expected_std(mean, var)[0]) * area,
                         float(low[0]), float(high[0]), density, 1, area)

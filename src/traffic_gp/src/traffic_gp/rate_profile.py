@@ -21,7 +21,8 @@ from typing import Dict, Optional
 
 import numpy as np
 
-from traffic_gp.errors import ConfigError, ModelFormatError
+from robot_common.errors import ConfigError
+from traffic_gp.errors import ModelFormatError
 
 KINDS = ("daily", "daytype", "weekly")
 PLACE_RESOLUTION = 0.01     # metres: rows whose (x, y) round to the same 1 cm are one place

@@ -1,7 +1,7 @@
 """ROS side of the crowd model: PeopleCount messages in, predictions and crowd cost maps out.
 
-`TrafficServer` is built from a `ServerConfig` (construction is pure); `setup()` wires ROS. The
-node executable `nodes/traffic_server` only reads the parameters and calls `start`.
+`TrafficServer` is built from a `TrafficServerParams` (construction is pure); `setup()` wires ROS.
+The node executable `nodes/traffic_server` only reads the parameters and calls `start`.
 """
 import json
 import math
@@ -17,7 +17,8 @@ import rospy
 from nav_msgs.msg import OccupancyGrid
 from std_srvs.srv import Trigger, TriggerResponse
 
-from robot_common.cells import CellGrid, hours_of_week, visible_cells
+from robot_common.cells import CellGrid, visible_cells
+from robot_common.errors import ConfigError
 from robot_common.maps import load_map
 from robot_common.msg import PeopleCount
 from robot_common.ros_maps import grid_to_msg, msg_to_grid
@@ -27,10 +28,10 @@ from ros_mongo.errors import StoreError
 from ros_mongo.urls import redact_url
 from traffic_gp.errors import TrafficError
 from traffic_gp.model import TrafficGP
-from traffic_gp.observations import Observations, aggregate_view
+from traffic_gp.observations import Observations, aggregate_view, hours_since_monday
+from traffic_gp.params import TrafficServerParams
 from traffic_gp.posterior import PosteriorSnapshot
 from traffic_gp.queries import CrowdQueries
-from traffic_gp.server_config import ServerConfig
 from traffic_gp.srv import PredictCount, PredictCountResponse, PredictRegion, PredictRegionResponse
 
 PEOPLE_COUNT_TYPE = "robot_common/PeopleCount"
@@ -53,7 +54,7 @@ def learned_path(model_path: str) -> str:
 class TrafficServer:
     """Learns where and when people are from PeopleCount messages; serves a crowd cost map.
 
-    Parameters (private, `ServerConfig`; generated config/traffic_gp.yaml):
+    Parameters (private, `TrafficServerParams`; generated config/traffic_gp.yaml):
       ~map_yaml ("": the `map` topic), ~cell_size (0.5 m), ~model_path ("": start untrained;
       else load it at start, without training, and save there), ~save_on_shutdown (false),
       ~utc_offset_hours (null / "" / "local": the machine's zone), ~clock ("ros": now is ROS
@@ -63,6 +64,9 @@ class TrafficServer:
       ~lookahead_step_minutes (5), ~saturation_density (1 person/m^2 = 95), ~wall_value (-1 or
       100), ~full_resolution (true: cost maps at the map's resolution), ~frame_id ("map"),
       ~model ({}: dict of TrafficGP keyword arguments).
+    The first fit (once ~min_rows rows are in) is `TrafficGP.fit`: it holds out the most recent
+      days, chooses the settings on them, serves FreMEn or the binned mean where they forecast
+      those days better and calibrates the intervals; later rows are folded in online.
       ~source ("topic": the `people_counts` topic; "central": the `_changes` feed of the central
       fleet database ~central_url, PeopleCount message documents of every robot, optionally of
       ~central_topics only), ~central_credentials_file.
@@ -76,10 +80,11 @@ class TrafficServer:
       `~crowd_costmap_now` (nav_msgs/OccupancyGrid, 0..95, walls wall_value).
     Services: `~predict_count` (traffic_gp/PredictCount), `~predict_region`
       (traffic_gp/PredictRegion), `~save_model` (std_srvs/Trigger), `~status` (std_srvs/Trigger:
-      which robots and how many rows and messages of each the model learned from).
+      which robots and how many rows and messages of each the model learned from, the settings
+      the model chose and why, what it serves where, its interval calibration).
     """
 
-    def __init__(self, config: ServerConfig):
+    def __init__(self, config: TrafficServerParams):
         self.config = config
         self.cells: Optional[CellGrid] = None
         self.model = None
@@ -181,7 +186,7 @@ class TrafficServer:
     def to_rows(self, msg: PeopleCount) -> Observations:
         """Rows of one message (per seen cell, or one for a total count within a radius)."""
         stamp = msg.header.stamp.to_sec()
-        hours = float(hours_of_week(stamp, self.config.utc_offset_hours))
+        hours = float(hours_since_monday(stamp, self.config.utc_offset_hours))
         if msg.cells:
             if not (len(msg.cells) == len(msg.seen_fraction) == len(msg.counts)):
                 raise TrafficError(f"{len(msg.cells)} cells, {len(msg.seen_fraction)} fractions "
@@ -250,16 +255,21 @@ class TrafficServer:
             trainable = TrafficGP.load(self.model.path)
             with self._lock:
                 self.model = trainable
-        steps = self.config.initial_steps if self.model is None else self.model.online_steps
         if self.model is None:
-            model = TrafficGP(**self.config.model).fit(new, n_steps=0, cells=self.cells)   # raises: rows kept
+            # the first fit: choices on the most recent days, outside the lock (no model is
+            # served yet); raises: the rows stay pending
+            model = TrafficGP(**self.config.model).fit(new, n_steps=self.config.initial_steps,
+                                                       cells=self.cells)
             with self._lock:
                 self.model = model
                 self._commit_learned()
-        else:
-            with self._lock:
-                self.model.partial_fit(new, n_steps=0)
-                self._commit_learned()
+            self._pending = []
+            rospy.loginfo(f"traffic_gp: first fit: {model.status()}")
+            return
+        steps = self.model.online_steps
+        with self._lock:
+            self.model.partial_fit(new, n_steps=0)
+            self._commit_learned()
         self._pending = []
         for done in range(0, steps, self.config.chunk_steps):
             if self._stop.is_set():
@@ -293,8 +303,10 @@ class TrafficServer:
                 source += f" (last error: {self.follower.last_error})"
         else:
             source = "topic people_counts"
+        with self._lock:
+            chosen = self.model.status() if self.model is not None else "no model yet"
         return (f"model of {model_rows} rows; learned from {len(learned)} robots: {robots}; "
-                f"source {source}")
+                f"source {source}; model: {chosen}")
 
     # ---- answers --------------------------------------------------------------------------
     def now_hours(self, stamp=None) -> float:
@@ -304,7 +316,7 @@ class TrafficServer:
             seconds = self.last_stamp
         else:
             seconds = rospy.Time.now().to_sec()
-        return float(hours_of_week(seconds, self.config.utc_offset_hours))
+        return float(hours_since_monday(seconds, self.config.utc_offset_hours))
 
     def _queries(self) -> CrowdQueries:
         if self.cells is None:
@@ -320,7 +332,7 @@ class TrafficServer:
                 raise TrafficError(f"x and y must be finite, got ({req.x}, {req.y})")
             with self._lock:
                 est = self._queries().at(req.x, req.y, self.now_hours(req.stamp))
-        except TrafficError as err:
+        except (TrafficError, ConfigError) as err:
             return PredictCountResponse(success=False, message=str(err))
         return PredictCountResponse(True, self._status(), est.expected, est.stddev, est.lower,
                                     est.upper, est.density, self.cells.cell_size)
@@ -332,7 +344,7 @@ class TrafficServer:
                 raise TrafficError("region vertices must be finite")
             with self._lock:
                 est = self._queries().region(polygon, self.now_hours(req.stamp))
-        except TrafficError as err:
+        except (TrafficError, ConfigError) as err:
             return PredictRegionResponse(success=False, message=str(err))
         return PredictRegionResponse(True, self._status(), est.expected, est.stddev, est.lower,
                                      est.upper, est.cells, est.area)
@@ -394,6 +406,6 @@ class TrafficServer:
 
 def start() -> TrafficServer:
     """Read the node's parameters, build the server and wire it to ROS (after init_node)."""
-    server = TrafficServer(read_config(ServerConfig))
+    server = TrafficServer(read_config(TrafficServerParams))
     server.setup()
     return server

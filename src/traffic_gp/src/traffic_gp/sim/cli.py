@@ -35,7 +35,8 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
     train.add_argument("--robots", type=int, default=3)
     train.add_argument("--steps", type=int, default=1500)
     train.add_argument("--inducing", type=int, default=400)
-    train.add_argument("--weekly", action="store_true", help="model the week, not one day")
+    train.add_argument("--weekly", action="store_true",
+                       help="model the week, not one day (default: chosen on the last days)")
     train.add_argument("--seed", type=int, default=1)
     train.add_argument("--out", type=Path, required=True)
     train.add_argument("--report", type=Path, help="also write plots here")
@@ -53,15 +54,16 @@ def train(args) -> dict:
     sim = simulator_for(args.map, args.cell_size, seed=args.seed)
     start = time.perf_counter()
     views = weekday_views(sim, args.views, weeks=args.weeks, robots=args.robots, progress=True)
-    period = 168.0 if args.weekly else 24.0
-    rows = Observations.from_views(sim.cells, views).compress(1 / 60.0, period)
+    rows = Observations.from_views(sim.cells, views).compress(1 / 60.0, None)   # time order kept
     print(f"{len(views)} views -> {len(rows)} rows (per cell and minute) in "
           f"{time.perf_counter() - start:.1f} s", flush=True)
-    model = TrafficGP(n_inducing=args.inducing, n_steps=args.steps, weekly=args.weekly,
-                      random_state=args.seed, progress=True).fit(rows, cells=sim.cells)
+    model = TrafficGP(n_inducing=args.inducing, n_steps=args.steps,
+                      weekly=True if args.weekly else "auto", random_state=args.seed,
+                      progress=True).fit(rows, cells=sim.cells)
     meta = {"map": args.map, "cell_size": args.cell_size, "views": len(views), "seed": args.seed}
     model.save(args.out, meta=meta)
     print(f"trained {model.n_steps_} steps in {model.train_seconds_:.1f} s; saved {args.out}")
+    print(model.status())
     return {"model": model, "sim": sim}
 
 

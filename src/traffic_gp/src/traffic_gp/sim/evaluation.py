@@ -12,10 +12,10 @@ from scipy import stats
 
 import traffic_gp.plots as plots
 import traffic_gp.predictive as predictive
+from robot_common.errors import ConfigError
 from robot_common.maps import FREE, OCCUPIED, GridMap, load_map
 from robot_sim.building import Building, generate_building
 from robot_sim.people import PeopleSimulator
-from traffic_gp.errors import ConfigError
 from traffic_gp.observations import Observations
 
 WEDNESDAY = 48.0
