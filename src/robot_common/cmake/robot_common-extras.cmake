@@ -1,6 +1,19 @@
 # CMake helpers every package of the workspace uses (installed with robot_common; a package gets
 # them with find_package(catkin REQUIRED COMPONENTS robot_common ...)).
 
+# robot_common_add_tests(TEST_DIR [LAUNCH_DIR]): the package's tests for catkin: its pytest suite
+# (robot_common_add_pytests) and, when given, a roslaunch-check of every launch file in LAUNCH_DIR.
+function(robot_common_add_tests test_dir)
+  if(DEFINED CATKIN_ENABLE_TESTING AND NOT CATKIN_ENABLE_TESTING)
+    return()
+  endif()
+  if(ARGC GREATER 1)
+    find_package(roslaunch REQUIRED)
+    roslaunch_add_file_check(${ARGV1})
+  endif()
+  robot_common_add_pytests(${test_dir})
+endfunction()
+
 # robot_common_add_pytests(DIR): register the package's pytest suite in DIR with catkin, so that
 # `catkin_make run_tests` (or `make run_tests_<package>`) runs it and leaves JUnit XML in
 # build/test_results/<package>/pytest-<package>.xml for catkin_test_results. pytest finds the
