@@ -9,14 +9,14 @@ import pytest
 from lfd_controller.errors import LfdError
 from lfd_controller.expert import true_reward
 from lfd_controller.features import Task
-from lfd_controller.params import RewardControllerConfig
+from lfd_controller.params import RewardControllerParams
 from lfd_controller.planner import CollisionBarrier, RecedingHorizonController
 from lfd_controller.ros_controller import RewardControllerNode
 from robot_common.unicycle import Unicycle
 
 
 def test_without_sim_time_the_episode_time_is_wall_clock_since_enabled():
-    config = RewardControllerConfig.from_mapping({"reward_file": "r.yaml", "rate": 5.0,
+    config = RewardControllerParams.from_mapping({"reward_file": "r.yaml", "rate": 5.0,
                                                   "collision_margin": 0.1})
     node = RewardControllerNode(true_reward(), config)
     assert node.controller.budget == pytest.approx(0.2)

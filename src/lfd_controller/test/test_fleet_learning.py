@@ -13,7 +13,7 @@ import yaml
 
 from lfd_controller import ros_demos
 from lfd_controller.errors import DemonstrationError
-from lfd_controller.ros_learning import demos_per_robot, learn_from_sources, load_sources
+from lfd_controller.learn_reward import demos_per_robot, learn_from_sources, load_sources
 from ros_mongo import open_store
 
 LEARN_REWARD = Path(__file__).resolve().parents[1] / "nodes" / "learn_reward"

@@ -336,3 +336,26 @@ def test_with_the_time_cost_the_robot_arrives_at_about_its_preferred_speed():
     assert arrival_time(0.25) <= 1.15 * 1.25 / 0.266            # within 15 % of 4.7 s
     assert arrival_time(0.0) > 7.0                              # the crawl
     assert arrival_time(0.25, absorbing_only=True) > 7.0
+
+
+def test_unstall_takes_a_controller_that_wants_to_stand_still_past_the_obstacle(static_scenario):
+    """A reward that only prices the commands keeps the robot where it is; with unstall the controller
+    gives up waiting after 1.5 s and follows a detour past the obstacle (on the side the robot
+    faces, here the left of its way: the obstacle is dead ahead)."""
+    from lfd_controller.learning import person_controller, person_driving, person_features
+    from lfd_controller.rewards import LinearReward
+
+    features = person_features()
+    reward = LinearReward([-1.0 if n in ("speed_effort", "turn_effort") else 0.0 for n in features.names],
+                          features)
+    task, model = Task.from_scenario(static_scenario), static_scenario.model()
+    moved = {}
+    for unstall in (0.0, 1.5):
+        controller = person_controller(reward, static_scenario, budget=None,
+                                       settings=dict(person_driving(0.1), unstall=unstall))
+        state = np.array([-2.5, 0.0, 0.05, 0.0, 0.0])
+        for k in range(30):                       # 3 s at 10 Hz
+            state = model.step(state, controller.act(state, 0.1 * k, task))
+        moved[unstall] = (state[:2] - [-2.5, 0.0], controller.escapes_)
+    assert np.hypot(*moved[0.0][0]) < 0.02 and moved[0.0][1] == 0
+    assert moved[1.5][1] == 1 and moved[1.5][0][0] > 0.1 and moved[1.5][0][1] > 0.02, moved

@@ -93,7 +93,7 @@ def test_teleop_needs_the_dead_man_button_and_scales_axes(rospy_node, roslaunch)
 def test_recording_by_joystick_buttons_stores_the_demo_in_a_bag_and_the_database(
         rospy_node, roslaunch, couchdb_url, tmp_path):
     from lfd_controller.errors import DemonstrationError
-    from lfd_controller.ros_learning import load_sources
+    from lfd_controller.learn_reward import load_sources
 
     launch = roslaunch("lfd_controller", "teleop_record.launch", scenario="static_obstacle",
                        time_scale=2.0, bag_dir=str(tmp_path / "bags"), db_url=couchdb_url,
@@ -148,7 +148,7 @@ def test_recording_by_joystick_buttons_stores_the_demo_in_a_bag_and_the_database
 def test_robot_mode_pairs_odometry_with_the_latest_cmd_vel(rospy_node, roslaunch, tmp_path):
     """On a robot there is no cmd_vel_applied/sim_time: the recorder pairs each odometry message
     with the newest cmd_vel. The simulator stands in for the robot; its exact record is the truth."""
-    from lfd_controller.ros_learning import load_sources
+    from lfd_controller.learn_reward import load_sources
 
     launch = roslaunch("lfd_controller", "teleop_record.launch", scenario="static_obstacle",
                        bag_dir=str(tmp_path / "bags"), use_applied_cmd=False)

@@ -1,5 +1,6 @@
-"""Learning from what the robot recorded: demonstrations from bags and the database (ros_mongo),
-the learned reward back into the database; the learning itself is `learning.learn_and_save`.
+"""learn_reward: learning from what the robot recorded - demonstrations from bags and the database
+(ros_mongo), the learned reward back into the database, and the command line (`main`); the
+learning itself is `learning.learn_and_save`.
 
 The database may be a fleet's central database (every robot's replicated recordings): each
 database demonstration keeps the robot that recorded it (`demo.meta["robot_id"]`), `robot_ids`
@@ -7,8 +8,10 @@ keeps those of some robots only, and the summary and the stored reward's info co
 demonstrations per robot (`demonstrations_per_robot`).
 
 Every failure to read or write a source is an LfdError (DemonstrationError when no usable
-demonstration is found), which learn_reward turns into one `ERROR:` line.
+demonstration is found; RewardNotAcceptedError for a person reward refused by its acceptance
+check), which `main` turns into one `ERROR:` line and exit status 1.
 """
+import sys
 from typing import Dict, List, Optional, Sequence
 
 import yaml
@@ -18,6 +21,8 @@ from lfd_controller import ros_demos
 from lfd_controller.demos import Demonstration
 from lfd_controller.errors import DemonstrationError, LfdError
 from lfd_controller.learning import learn_and_save
+from lfd_controller.params import LearnRewardParams
+from robot_common.errors import ConfigError
 from ros_mongo import StoreError, open_store, redact_url
 
 NO_ROBOT = "(no robot id)"  # database demonstrations recorded without a robot id
@@ -86,7 +91,7 @@ def store_reward(reward, db_url: str, info: Optional[dict] = None) -> str:
 def learn_from_sources(bags, db_url: str = "", *, scenario: str = "", session_id: str = "",
                        robot_ids: Sequence[str] = (), kind: str = "linear", output: str,
                        store_db: bool = False, plots: str = "", seed: int = 0,
-                       trim_steps: Optional[int] = 10) -> str:
+                       trim_steps: Optional[int] = 10, accept_mismatch: bool = False) -> str:
     """Load, learn, save (store with `store_db` and a `db_url`, and plot); returns a summary
     whose last line counts the demonstrations per robot (also in the stored reward's info)."""
     demos = load_sources(bags, db_url, scenario, session_id, robot_ids)
@@ -96,6 +101,24 @@ def learn_from_sources(bags, db_url: str = "", *, scenario: str = "", session_id
         return store_reward(reward, db_url, dict(info, demonstrations_per_robot=per_robot))
 
     summary = learn_and_save(demos, kind=kind, output=output, plots=plots, seed=seed,
-                             trim_steps=trim_steps, store=store if store_db and db_url else None)
+                             trim_steps=trim_steps, store=store if store_db and db_url else None,
+                             accept_mismatch=accept_mismatch)
     robots = ", ".join(f"{robot}: {count}" for robot, count in per_robot.items())
     return f"{summary}\ndemonstrations per robot: {robots}"
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """learn_reward's command line (options: params.LearnRewardParams; --help lists them)."""
+    args = [a for a in (sys.argv[1:] if argv is None else argv) if not a.startswith("__")]
+    try:
+        config = LearnRewardParams.from_args(args)
+        summary = learn_from_sources(config.bags, config.db_url, scenario=config.scenario,
+                                     session_id=config.session_id, robot_ids=config.robot_ids,
+                                     kind=config.kind, output=config.output, store_db=config.store_db,
+                                     plots=config.plots, seed=config.seed, trim_steps=config.trim,
+                                     accept_mismatch=config.accept_mismatch)
+    except (ConfigError, LfdError) as err:
+        print(f"ERROR: {err}", file=sys.stderr)
+        return 1
+    print(summary)
+    return 0

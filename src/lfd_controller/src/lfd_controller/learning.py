@@ -1,7 +1,7 @@
 """Learning a reward from demonstrations end to end: fit, save, load, plot (no ROS).
 
 The pipeline takes demonstrations already loaded; reading them from bags and the database, and
-storing the learned reward there, is ROS-side (`ros_learning`), which hands `learn_and_save` a
+storing the learned reward there, is the `learn_reward` module's, which hands `learn_and_save` a
 `store` callable. Reward files are YAML written by `save_reward`; `load_reward` raises
 RewardFileError when one is missing or malformed.
 """
@@ -14,11 +14,13 @@ import yaml
 from threadpoolctl import threadpool_limits
 
 from lfd_controller import plots as plotting
+from lfd_controller.acceptance import Acceptance, calibrate
 from lfd_controller.cioc import LinearCIOC
 from lfd_controller.demos import Demonstration, demos_summary, trim_to_goal, windows
-from lfd_controller.errors import LfdError, RewardFileError
+from lfd_controller.errors import LearningError, LfdError, RewardFileError
 from lfd_controller.features import FeatureSet
 from lfd_controller.gp_cioc import GPCIOC
+from lfd_controller.planner import CollisionBarrier, RecedingHorizonController
 from lfd_controller.rewards import reward_from_dict
 
 # store(reward, info) -> where the reward was stored (a database id)
@@ -78,24 +80,80 @@ PERSON_TRIM = 0
 # and an absorbing goal region of the scenarios' goal tolerance (arrival 0.25 m: after arrival a
 # plan step is worth resting at the goal, so no effort cost accrues there; without it the shorter
 # look-ahead let the speed/turn costs stretch the last metres into a creep past the region's
-# edge: sporty static 15/20 -> 20/20 validation starts) (RecedingHorizonController options).
+# edge: sporty static 15/20 -> 20/20 validation starts), and after 1.5 s standing still away from
+# the goal a detour past the obstacle (unstall: the plan's local optimum straight in front of a
+# static obstacle is stable once the calibrated reward drives at a slow person's pace)
+# (RecedingHorizonController options).
 PERSON_CONTROLLER = {"horizon": 20, "plan_dt": 0.4, "terminal": 0.0, "detour": 0.8,
-                     "spread_seeds": True, "discount": 0.97, "min_horizon": 8, "arrival": 0.25}
+                     "spread_seeds": True, "discount": 0.97, "min_horizon": 8, "arrival": 0.25,
+                     "unstall": 1.5}
 # What reward_controller needs to drive a person reward (saved with it, `controller:` in the file):
 # PERSON_CONTROLLER plus the fixed collision barrier (m beyond touching; planner.CollisionBarrier).
 PERSON_DRIVING = dict(PERSON_CONTROLLER, collision_margin=0.1)
 
 
-def fit_person_reward(demos: Sequence[Demonstration], seed: int = 0):
+def person_driving(margin: float = PERSON_DRIVING["collision_margin"]) -> Dict[str, Any]:
+    """PERSON_DRIVING with the collision barrier `margin` m beyond touching and the detour seeds
+    moved out by as much as the margin grew (they must pass outside the barrier)."""
+    grown = max(0.0, margin - PERSON_DRIVING["collision_margin"])
+    return dict(PERSON_DRIVING, collision_margin=round(float(margin), 4),
+                detour=round(PERSON_DRIVING["detour"] + grown, 4))
+
+
+def person_controller(reward, scenario, *, budget: Optional[float] = 0.1,
+                      settings: Optional[Dict[str, Any]] = None) -> RecedingHorizonController:
+    """The receding-horizon controller that drives a person reward in `scenario`: `settings`
+    (default PERSON_DRIVING; a learned reward's are `learner.driving_`, saved with it) with the
+    CollisionBarrier, a cycle budget of `budget` s."""
+    settings = dict(PERSON_DRIVING if settings is None else settings)
+    margin = float(settings.pop("collision_margin", 0.0))
+    planned = CollisionBarrier(reward, scenario.clearance, margin=margin) if margin > 0 else reward
+    return RecedingHorizonController(planned, scenario.model(), budget=budget, **settings)
+
+
+# Controller-in-the-loop calibration (acceptance.calibrate): rounds of the controller's own drives
+# from up to max_drives demonstration starts. The check's controller has no cycle budget, so its
+# verdict does not depend on how busy the machine is while learning.
+PERSON_CALIBRATION = {"rounds": 4, "max_drives": 4}
+
+
+def fit_person_reward(demos: Sequence[Demonstration], seed: int = 0, *, calibration: Optional[Dict] = None,
+                      progress: Optional[Callable] = None):
     """(reward, learner): linear CIOC over person_features() with PERSON_SIGNS and learned command
-    noise, from demonstrations cut where they first reach the goal, in PERSON_WINDOW-step windows."""
+    noise, from demonstrations cut where they first reach the goal, in PERSON_WINDOW-step windows;
+    then the controller's own drives from the demonstrations' starts are compared with the
+    demonstrations and the reward's speed and obstacle scales and the collision barrier's margin
+    refined (acceptance.calibrate; calibration: its options, default PERSON_CALIBRATION;
+    {"rounds": 0}: no check). The report is `learner.acceptance_` (None without a check), the
+    controller settings to drive the reward with `learner.driving_` (person_driving),
+    `learner.cioc_reward_` is CIOC's own reward."""
+    demos = list(demos)
     pieces = [piece for demo in demos
               for piece in windows(trim_to_goal(demo, PERSON_TRIM), PERSON_WINDOW, PERSON_STRIDE)]
     learner = LinearCIOC(person_features(), random_state=seed, signs=PERSON_SIGNS,
                          action_noise=PERSON_NOISE, second_order=False)
     with threadpool_limits(1):
         learner.fit(pieces)
-    return learner.reward_, learner
+        reward, learner.cioc_reward_, learner.acceptance_ = learner.reward_, learner.reward_, None
+        learner.driving_ = dict(PERSON_DRIVING)
+        options = dict(PERSON_CALIBRATION, **(calibration or {}))
+        if options["rounds"] > 0:
+            reward, learner.acceptance_ = calibrate(
+                reward, [d for d in demos if d.meta.get("reached", True)] or demos,
+                lambda r, scenario, margin: person_controller(r, scenario, budget=None,
+                                                              settings=person_driving(margin)),
+                progress=progress, **options)
+            learner.driving_ = person_driving(learner.acceptance_.scales["margin"])
+    return reward, learner
+
+
+class RewardNotAcceptedError(LearningError):
+    """The learned reward's controller does not drive like the demonstrations (see `acceptance`)."""
+
+    def __init__(self, acceptance: Acceptance):
+        super().__init__("the learned reward was NOT saved: its controller does not drive like the "
+                         "demonstrations. " + acceptance.describe())
+        self.acceptance = acceptance
 
 
 def save_reward(reward, path, **info) -> Path:
@@ -134,28 +192,39 @@ def controller_settings(path) -> Dict[str, Any]:
 
 def learn_and_save(demos: Sequence[Demonstration], *, kind: str = "linear", output: str,
                    plots: str = "", seed: int = 0, trim_steps: Optional[int] = 10,
-                   store: Optional[RewardStore] = None) -> str:
+                   store: Optional[RewardStore] = None, accept_mismatch: bool = False,
+                   calibration: Optional[Dict] = None) -> str:
     """Learn, save (store, plot); returns a summary. kind "linear" or "gp" (default features) or
-    "person" (fit_person_reward: drive it with PERSON_CONTROLLER and a collision barrier). Demos
-    are cut `trim_steps` after first reaching the goal (None: uncut), so idling after a drive does
-    not count as demonstrated behaviour; `store(reward, info)`, when given, also keeps the reward
-    elsewhere."""
+    "person" (fit_person_reward: drive it with PERSON_DRIVING, saved with it). Demos are cut
+    `trim_steps` after first reaching the goal (None: uncut), so idling after a drive does not
+    count as demonstrated behaviour; `store(reward, info)`, when given, also keeps the reward
+    elsewhere. A person reward whose controller does not drive like the demonstrations
+    (acceptance.calibrate) is not saved: RewardNotAcceptedError says what was matched and what
+    not, unless accept_mismatch (then saved with the report in its info)."""
     demos = list(demos)
     if trim_steps is not None:
         demos = [trim_to_goal(d, trim_steps) for d in demos]
     started = time.monotonic()
     if kind == "person":
-        reward, learner = fit_person_reward(demos, seed)
+        reward, learner = fit_person_reward(demos, seed, calibration=calibration)
     else:
         reward, learner = fit_reward(demos, kind, seed)
     seconds = time.monotonic() - started
     info = {"demonstrations": len(demos), "steps": int(sum(d.length for d in demos)),
             "learning_seconds": round(seconds, 2), "beta": float(learner.beta_),
             "log_likelihood_per_demo": float(learner.log_likelihood_)}
+    acceptance = getattr(learner, "acceptance_", None)
+    if acceptance is not None:
+        if not acceptance.accepted and not accept_mismatch:
+            raise RewardNotAcceptedError(acceptance)
+        info["acceptance"] = _plain(acceptance.to_dict())
     if kind == "person":
-        info["controller"] = dict(PERSON_DRIVING)
+        info["controller"] = dict(learner.driving_)
     path = save_reward(reward, output, **info)
     lines = [f"learned a {kind} reward from {demos_summary(demos)} in {seconds:.1f} s -> {path}"]
+    if acceptance is not None:
+        lines.append(("accepted: " if acceptance.accepted else "saved although NOT accepted "
+                      "(--accept-mismatch): ") + acceptance.describe())
     if kind in ("linear", "person"):
         lines.append("weights: " + json.dumps(reward.to_dict()["weights"]))
     if store is not None:
@@ -166,3 +235,14 @@ def learn_and_save(demos: Sequence[Demonstration], *, kind: str = "linear", outp
             plotting.plot_demonstrations(demos, folder / "demonstrations.png"),
             plotting.plot_reward_field(reward, demos[0].scenario, folder / "reward_field.png", demos))))
     return "\n".join(lines)
+
+
+def _plain(value):
+    """Plain Python values (YAML-safe) from a report of numpy scalars."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if hasattr(value, "item"):
+        return value.item()
+    return value

@@ -5,7 +5,7 @@ Each default is written once, here (or in the core class it names: the joystick 
 in config/ that the launch files load are generated from these classes
 (`python -m robot_common.config_files --write`); the nodes read their `~` parameters into them
 with `robot_common.ros_node.read_config`. `learn_reward` is a command-line tool: its options are
-built from `LearnRewardConfig` (`learn_reward_parser`).
+built from `LearnRewardParams` (`learn_reward_parser`).
 """
 import argparse
 import dataclasses
@@ -17,7 +17,7 @@ from robot_common.errors import ConfigError
 from robot_common.params import NodeConfig, param
 from robot_common.unicycle import UnicycleLimits
 
-__all__ = ["JoyTeleopConfig", "DemoRecorderConfig", "RewardControllerConfig", "LearnRewardConfig",
+__all__ = ["JoyTeleopParams", "DemoRecorderParams", "RewardControllerParams", "LearnRewardParams",
            "learn_reward_parser", "ROS_HOME_PREFIX"]
 
 # Leading marker of a path under $ROS_HOME (or ~/.ros), resolved by the node that uses it.
@@ -27,7 +27,7 @@ LIMIT_NAMES = ("v_max", "w_max", "a_max", "alpha_max")
 
 
 @dataclass
-class JoyTeleopConfig(NodeConfig):
+class JoyTeleopParams(NodeConfig):
     """joy_teleop: an Xbox 360 pad under the Linux joy driver (xpad) by default."""
 
     axis_linear: int = param(JoyMapping.axis_linear, "stick axis that drives (left stick up/down)")
@@ -47,7 +47,7 @@ class JoyTeleopConfig(NodeConfig):
 
 
 @dataclass
-class DemoRecorderConfig(NodeConfig):
+class DemoRecorderParams(NodeConfig):
     """demo_recorder: where demonstrations go and how samples are paired."""
 
     bag_dir: str = param(ROS_HOME_PREFIX + "/lfd_demos",
@@ -63,7 +63,7 @@ class DemoRecorderConfig(NodeConfig):
 
 
 @dataclass
-class RewardControllerConfig(NodeConfig):
+class RewardControllerParams(NodeConfig):
     """reward_controller: receding-horizon control with a learned reward."""
 
     reward_file: str = param("", "reward saved by learn_reward (required)")
@@ -96,16 +96,19 @@ class RewardControllerConfig(NodeConfig):
                                 "it to ~goal_tolerance): a step after arrival is worth resting at "
                                 "the goal, no effort cost accrues there; 0: off (person rewards: "
                                 "0.25)")
+    unstall: float = param(0.0, "> 0 (needs ~detour): after this many seconds standing still away "
+                                "from the goal, follow a detour past the obstacle for as long "
+                                "(person rewards: 1.5); 0: off")
     frame: str = param("odom", "frame of the published plan")
     enabled: bool = param(True, "drive from the start (service ~enable switches)")
     reward_settings: bool = param(True, "drive with the controller settings saved with the reward "
                                         "(learn_reward --kind person saves horizon, plan_dt, "
                                         "terminal, detour, spread_seeds, discount, "
-                                        "min_horizon, arrival, collision_margin) instead of "
+                                        "min_horizon, arrival, unstall, collision_margin) instead of "
                                         "these")
 
     SAVED_SETTINGS = ("horizon", "plan_dt", "terminal", "detour", "spread_seeds", "discount",
-                      "min_horizon", "arrival", "collision_margin")
+                      "min_horizon", "arrival", "unstall", "collision_margin")
 
     def check(self) -> None:
         if not self.rate > 0:
@@ -121,12 +124,15 @@ class RewardControllerConfig(NodeConfig):
                               f"got {self.min_horizon!r}")
         if self.arrival < 0:
             raise ConfigError(f"~arrival must be >= 0 (0: off), got {self.arrival!r}")
+        if self.unstall < 0 or (self.unstall > 0 and self.detour <= 0):
+            raise ConfigError(f"~unstall must be >= 0 (0: off) and needs ~detour > 0, got "
+                              f"{self.unstall!r}")
 
     def limits(self) -> UnicycleLimits:
         """The robot's limits (ModelError when one is not positive)."""
         return UnicycleLimits(**{name: getattr(self, name) for name in LIMIT_NAMES})
 
-    def with_reward_settings(self, settings: Dict[str, Any]) -> "RewardControllerConfig":
+    def with_reward_settings(self, settings: Dict[str, Any]) -> "RewardControllerParams":
         """This configuration with the reward's saved controller settings applied (when
         ~reward_settings); ConfigError for an unknown setting or a bad value."""
         if not self.reward_settings or not settings:
@@ -144,11 +150,11 @@ class RewardControllerConfig(NodeConfig):
         return {"horizon": self.horizon, "plan_dt": self.plan_dt, "terminal": self.terminal,
                 "max_iter": self.max_iter, "detour": self.detour,
                 "spread_seeds": self.spread_seeds, "discount": self.discount,
-                "min_horizon": self.min_horizon, "arrival": self.arrival}
+                "min_horizon": self.min_horizon, "arrival": self.arrival, "unstall": self.unstall}
 
 
 @dataclass
-class LearnRewardConfig(NodeConfig):
+class LearnRewardParams(NodeConfig):
     """learn_reward: where demonstrations come from, the reward model, where it goes."""
 
     bags: List[str] = param([], "bag files or folders of bags")
@@ -165,6 +171,9 @@ class LearnRewardConfig(NodeConfig):
     seed: int = param(0, "random seed of the learner")
     trim_steps: int = param(10, "cut each demo this many steps after it first reaches the goal "
                                 "(-1: no cut)")
+    accept_mismatch: bool = param(False, "--kind person: save the reward even when its controller's "
+                                         "own drives do not match the demonstrations' speed, time "
+                                         "to goal and closest approach (default: refuse, exit 1)")
 
     REQUIRED = ("output",)
 
@@ -178,16 +187,16 @@ class LearnRewardConfig(NodeConfig):
         return None if self.trim_steps < 0 else self.trim_steps
 
     @classmethod
-    def from_args(cls, argv: Sequence[str]) -> "LearnRewardConfig":
+    def from_args(cls, argv: Sequence[str]) -> "LearnRewardParams":
         """Checked options from a command line (argparse exits 2 on a malformed one)."""
         return cls.from_mapping(vars(learn_reward_parser().parse_args(list(argv))))
 
 
 def learn_reward_parser() -> argparse.ArgumentParser:
-    """learn_reward's command line: one --option per LearnRewardConfig field (--db-url for db_url),
+    """learn_reward's command line: one --option per LearnRewardParams field (--db-url for db_url),
     with the class's defaults, descriptions and choices."""
     parser = argparse.ArgumentParser(description="Learn a reward from recorded demonstrations (CIOC).")
-    for name, default, doc in LearnRewardConfig.describe():
+    for name, default, doc in LearnRewardParams.describe():
         flag = "--" + name.replace("_", "-")
         options: Dict[str, Any]
         if isinstance(default, bool):
@@ -196,11 +205,11 @@ def learn_reward_parser() -> argparse.ArgumentParser:
             options = {"nargs": "*", "default": default}
         else:
             options = {"type": type(default), "default": default,
-                       "choices": _choices(name), "required": name in LearnRewardConfig.REQUIRED}
+                       "choices": _choices(name), "required": name in LearnRewardParams.REQUIRED}
         parser.add_argument(flag, dest=name, help=doc, **options)
     return parser
 
 
 def _choices(name: str) -> Optional[Sequence[Any]]:
-    spec = next(spec for spec in fields(LearnRewardConfig) if spec.name == name)
+    spec = next(spec for spec in fields(LearnRewardParams) if spec.name == name)
     return spec.metadata.get("choices")

@@ -19,6 +19,10 @@ COMMAND_BOUND = 1.5   # commands are bounded to 1.5 x the limits (the smooth lim
 # Steps an arrival look-ahead (RecedingHorizonController min_horizon > 0) keeps beyond the arrival
 # at the preferred speed (the robot accelerates and turns before it cruises).
 ARRIVAL_MARGIN_STEPS = 2
+# An unstall detour (RecedingHorizonController unstall > 0) lasts this many times the stall time.
+ESCAPE_FACTOR = 2.5
+# Below this speed (m/s; and commanding no more) the robot counts as standing (creeping) still.
+STALL_SPEED = 0.08
 
 
 def preferred_speed(reward, v_max: float) -> float:
@@ -334,14 +338,17 @@ class RecedingHorizonController:
         arrival_time_cost(reward, v_max)) - an absorbing goal region of that radius (the task's
         goal tolerance): no cost accrues after arrival and each step before it costs the price at
         which the reward arrives at its preferred speed (needs a linear reward); 0: the reward as
-        given.
+        given; unstall > 0 (needs detour): after that many seconds standing still away from the
+        goal, follow a detour seed past the obstacle for ESCAPE_FACTOR times as long, then plan
+        again (`escapes_` counts them): a person who wants the goal does not wait in front of a
+        static obstacle until the time runs out, and the plan's local optimum there is stable.
     """
 
     def __init__(self, reward, model, *, horizon: int = 20, plan_dt: Optional[float] = 0.2,
                  terminal: float = 10.0, max_iter: int = 15, seed_iter: int = 6, seed_every: int = 5,
                  seed_turns: Sequence[float] = (0.0, 1.2, -1.2), budget: Optional[float] = None,
                  detour: float = 0.0, spread_seeds: bool = False, discount: float = 1.0,
-                 min_horizon: int = 0, arrival: float = 0.0):
+                 min_horizon: int = 0, arrival: float = 0.0, unstall: float = 0.0):
         if horizon < 2:
             raise LfdError(f"the planning horizon must be at least 2 steps, got {horizon}")
         if plan_dt is not None and not plan_dt > 0:
@@ -367,6 +374,9 @@ class RecedingHorizonController:
         if arrival < 0:
             raise LfdError(f"the arrival radius must be >= 0 (0: off), got {arrival!r}")
         self.arrival = float(arrival)
+        if unstall < 0 or (unstall > 0 and self.detour <= 0):
+            raise LfdError(f"unstall must be >= 0 s (0: off) and needs detour > 0, got {unstall!r}")
+        self.unstall = float(unstall)
         if self.arrival > 0:
             self.reward = ArrivalReward(reward, self.arrival, time_cost=arrival_time_cost(
                 reward, self.model.limits.v_max))
@@ -378,6 +388,9 @@ class RecedingHorizonController:
         self.cycle_times_: list = []
         self.overruns_ = 0
         self.steps_ = self.horizon
+        self._still_since: Optional[float] = None
+        self._escape: Optional[tuple] = None       # (side, until episode time)
+        self.escapes_ = 0
 
     def planning_steps(self, state, task: Task) -> int:
         """Steps planned from `state`: `horizon`, or with min_horizon > 0 the arrival look-ahead."""
@@ -413,8 +426,43 @@ class RecedingHorizonController:
                 seeds.append(detour_seeds(self.model, self.steps_, state, t, task, self.detour)[side])
         return seeds
 
+    def _unstalled(self, state, t: float, task: Task, command: np.ndarray) -> np.ndarray:
+        """With unstall > 0: after `unstall` s standing or creeping (below STALL_SPEED) away from
+        the goal (the plan keeps the robot there: a local optimum in front of the obstacle),
+        follow a detour seed past the obstacle - on the side away from it, or the robot faces -
+        for ESCAPE_FACTOR x `unstall` s, then plan again."""
+        if self._escape is not None:
+            side, until = self._escape
+            if t < until:
+                seed = detour_seeds(self.model, 2, state, t, task, self.detour)[0 if side > 0 else 1]
+                return seed[0]
+            self._escape, self._still_since = None, None
+        far = np.hypot(*(np.asarray(task.goal, float) - state[:2])) > max(self.arrival, 0.25) * 1.5
+        if far and abs(state[3]) < STALL_SPEED and abs(command[0]) < STALL_SPEED:
+            self._still_since = t if self._still_since is None else self._still_since
+            if t - self._still_since >= self.unstall:
+                obstacle = np.asarray(task.obstacle_position(np.array(t)), float).reshape(2)
+                to_goal, to_obstacle = np.asarray(task.goal, float) - state[:2], obstacle - state[:2]
+                cross = to_goal[0] * to_obstacle[1] - to_goal[1] * to_obstacle[0]
+                heading = np.array([np.cos(state[2]), np.sin(state[2])])
+                lean = to_goal[0] * heading[1] - to_goal[1] * heading[0]
+                size = np.linalg.norm(to_goal) * np.linalg.norm(to_obstacle)
+                side = -np.sign(cross) if abs(cross) > 0.05 * size else (np.sign(lean) or 1.0)
+                self._escape = (side, t + ESCAPE_FACTOR * self.unstall)
+                self.escapes_ += 1
+                return self._unstalled(state, t, task, command)
+        else:
+            self._still_since = None
+        return command
+
     def act(self, state, t: float, task: Task) -> np.ndarray:
         """The command to apply now at state (5,) and episode time t."""
+        if self.unstall > 0:
+            state = np.asarray(state, float)
+            return self._unstalled(state, t, task, self._act(state, t, task))
+        return self._act(state, t, task)
+
+    def _act(self, state, t: float, task: Task) -> np.ndarray:
         started = time.perf_counter()
         self.steps_ = self.planning_steps(state, task)
         warm = self._warm_start(t)

@@ -13,7 +13,7 @@ from threadpoolctl import threadpool_limits
 
 from lfd_controller.features import Task
 from lfd_controller.learning import controller_settings, load_reward
-from lfd_controller.params import RewardControllerConfig
+from lfd_controller.params import RewardControllerParams
 from lfd_controller.planner import CollisionBarrier, RecedingHorizonController
 from robot_common.errors import ModelError, TaskError
 from robot_common.maps import yaw_to_quaternion
@@ -25,7 +25,7 @@ from robot_common.unicycle import Unicycle
 class RewardControllerNode:
     """Re-plans from the latest odometry at ~rate Hz and publishes the first command.
 
-    Parameters (lfd_controller.params.RewardControllerConfig; config/reward_controller.yaml):
+    Parameters (lfd_controller.params.RewardControllerParams; config/reward_controller.yaml):
       ~reward_file (str, required): a reward saved by learn_reward,
       ~rate (double, 10), ~horizon (int, 20), ~plan_dt (double, 0.2), ~terminal (double, 10),
       ~max_iter (int, 15), ~goal_tolerance (double, 0.25): stop (zero command) inside it,
@@ -46,7 +46,7 @@ class RewardControllerNode:
     Services: ~enable (std_srvs/SetBool): start or stop driving (stopping publishes a zero command).
     """
 
-    def __init__(self, reward, config: RewardControllerConfig):
+    def __init__(self, reward, config: RewardControllerParams):
         self.reward, self.lock = reward, threading.Lock()
         self.config = config
         self.frame = config.frame
@@ -180,7 +180,7 @@ def start() -> RewardControllerNode:
     """The node's start-up: ~parameters, the reward file (RewardFileError when missing or
     malformed), the controller, ROS wiring."""
     single_threaded_blas()
-    config = read_config(RewardControllerConfig)
+    config = read_config(RewardControllerParams)
     reward = load_reward(config.reward_file)
     saved = controller_settings(config.reward_file)
     config = config.with_reward_settings(saved)

@@ -13,7 +13,7 @@ from std_srvs.srv import Trigger, TriggerResponse
 from lfd_controller import ros_demos
 from lfd_controller.errors import DemonstrationError
 from lfd_controller.msg import Demonstration as DemonstrationMsg
-from lfd_controller.params import ROS_HOME_PREFIX, DemoRecorderConfig
+from lfd_controller.params import ROS_HOME_PREFIX, DemoRecorderParams
 from lfd_controller.recording import DemoBuilder, SampleMatcher
 from robot_common.errors import ModelError, TaskError
 from robot_common.ros_node import odom_state, read_config, ros_home
@@ -33,7 +33,7 @@ def resolve_bag_dir(value: str) -> Optional[Path]:
 class DemoRecorderNode:
     """Records one demonstration between ~start and ~stop.
 
-    Parameters (lfd_controller.params.DemoRecorderConfig; config/demo_recorder.yaml):
+    Parameters (lfd_controller.params.DemoRecorderParams; config/demo_recorder.yaml):
       ~bag_dir (str, "$ROS_HOME/lfd_demos"): one bag per demonstration ("" = no bags; a leading
       $ROS_HOME is the ROS_HOME environment variable or ~/.ros).
       ~db_url (str, ""): ros_mongo store URL (CouchDB or mongodb://...; "" = no database).
@@ -49,7 +49,7 @@ class DemoRecorderNode:
     Services: ~start, ~stop (std_srvs/Trigger; stop answers with where the demo was stored).
     """
 
-    def __init__(self, config: DemoRecorderConfig):
+    def __init__(self, config: DemoRecorderParams):
         self.lock = threading.Lock()
         self.builder = DemoBuilder(config.min_steps)
         self.matcher = SampleMatcher()
@@ -169,4 +169,4 @@ class DemoRecorderNode:
 
 def start() -> DemoRecorderNode:
     """The node's start-up: ~parameters -> recorder -> ROS wiring (ConfigError on a bad one)."""
-    return DemoRecorderNode(read_config(DemoRecorderConfig)).setup()
+    return DemoRecorderNode(read_config(DemoRecorderParams)).setup()

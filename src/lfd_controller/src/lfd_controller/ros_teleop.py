@@ -6,7 +6,7 @@ from geometry_msgs.msg import Twist
 from sensor_msgs.msg import Joy
 from std_srvs.srv import Trigger
 
-from lfd_controller.params import JoyTeleopConfig
+from lfd_controller.params import JoyTeleopParams
 from lfd_controller.teleop import JoyTeleop
 from robot_common.ros_node import read_config
 
@@ -14,7 +14,7 @@ from robot_common.ros_node import read_config
 class JoyTeleopNode:
     """Drives from a joystick while the dead-man button is held.
 
-    Parameters (lfd_controller.params.JoyTeleopConfig; config/joy_teleop.yaml; Xbox 360 pad under
+    Parameters (lfd_controller.params.JoyTeleopParams; config/joy_teleop.yaml; Xbox 360 pad under
     the joy driver):
       ~axis_linear (int, 1), ~axis_angular (int, 0), ~scale_linear (double, 0.5 m/s),
       ~scale_angular (double, 1.5 rad/s), ~deadzone (double, 0.05), ~enable_button (int, 4: LB),
@@ -24,7 +24,7 @@ class JoyTeleopNode:
       enabled, one zero command on release.
     """
 
-    def __init__(self, config: JoyTeleopConfig):
+    def __init__(self, config: JoyTeleopParams):
         self.teleop = JoyTeleop(config.mapping())
         recorder = config.recorder.rstrip("/")
         self.services = {"start": f"{recorder}/start", "stop": f"{recorder}/stop"}
@@ -57,4 +57,4 @@ class JoyTeleopNode:
 
 def start() -> JoyTeleopNode:
     """The node's start-up: ~parameters -> core -> ROS wiring (ConfigError, LfdError on bad ones)."""
-    return JoyTeleopNode(read_config(JoyTeleopConfig)).setup()
+    return JoyTeleopNode(read_config(JoyTeleopParams)).setup()

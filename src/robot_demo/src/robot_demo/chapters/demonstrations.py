@@ -1,5 +1,8 @@
-"""Learning from demonstration: a synthetic expert teleoperates through the joystick path, CIOC
-learns its reward from the recorded demos, and the learned controller drives in the simulator."""
+"""Learning from demonstration: a simulated person (lfd_controller.sim: a reactive driver with a
+reaction delay, a quantised stick and hand noise) drives through Joy -> joy_teleop -> unicycle_sim ->
+demo_recorder; the person pipeline (learn_reward --kind person: CIOC + the controller-in-the-loop
+acceptance check) learns from the recorded demos, and the learned controller drives in the
+simulator."""
 import threading
 import time
 
@@ -12,8 +15,10 @@ from std_srvs.srv import Trigger
 
 from robot_common.ros_node import odom_state
 
-TITLE = "Learning from demonstration: joystick demos -> CIOC reward -> controller (lfd_controller)"
-DEMOS, STEPS, DRIVES = 5, 70, 2
+TITLE = "Learning from demonstration: a person's joystick demos -> reward -> controller (lfd_controller)"
+DEMOS, DRIVES = 6, 2
+FAMILY = "tangent"            # the demonstrator family (lfd_controller.sim.FAMILIES)
+SITTING = 8                   # odometry steps the person sits at the goal before recording stops
 LB, A, B = 4, 0, 1
 # The lfd world runs beside the building robot of the other chapters: own namespace and frames.
 NS = "/lfd"
@@ -78,35 +83,39 @@ def new_episode(watch, reset):
          10, "the new episode")
 
 
-def record_demos(demo, scenario, joy, watch, reset):
-    from lfd_controller.expert import SyntheticExpert
-    from lfd_controller.teleop import JoyMapping, JoyTeleop
+def record_demos(scenario, joy, watch, reset):
+    """The person drives DEMOS times through Joy, one recording per drive (A starts, B stops)."""
+    from lfd_controller.sim import Person, make_person
 
-    teleop = JoyTeleop(JoyMapping(scale_linear=0.9, scale_angular=3.0))
-    expert = SyntheticExpert(steps=STEPS)
-    queue = []
+    person = Person(speed=0.4, delay=2, levels=5, noise=0.04, side=1.0, clearance=0.2,
+                    overshoot=0.0, turn_gain=2.5)
+    driver = make_person(FAMILY, 5, person=person)
+    drive = {"active": False, "sitting": 0}
 
-    def step():          # a teleoperator reacting to each simulator step
-        if queue:
-            buttons = [0] * 11
-            buttons[LB] = 1
-            joy.publish(Joy(axes=teleop.axes_for(*queue.pop(0)), buttons=buttons))
-            if not queue:     # the plan is done: release LB and press B (stop recording)
-                joy.publish(Joy(axes=[0.0] * 8, buttons=[0] * 11))
-                press(joy, B)
+    def step():          # the person answers each odometry message with the stick they hold
+        with watch.lock:
+            state, t = watch.state, watch.time
+        if not drive["active"] or state is None or t is None:
+            return
+        drive["sitting"] = drive["sitting"] + 1 if scenario.reached(state) else 0
+        joy.publish(Joy(axes=driver.axes(state, t), buttons=driver.buttons()))
+    print(f"  the person ({FAMILY} family): {driver.describe()}", flush=True)
     watch.on_step = step
     for k in range(DEMOS):
         new_episode(watch, reset)
-        start, t0 = watch.state.copy(), watch.time
-        plan = expert.plan(scenario, start, t0)
+        start = watch.state.copy()
+        driver.reset(scenario)
         press(joy, A)
         wait(lambda: watch.recording, 10, "recording to start")
-        queue.extend(plan.tolist())
-        step()       # the first command goes out now, so that the first recorded step applies it
-        wait(lambda: not queue, 30, "the demonstration drive")
+        drive.update(active=True, sitting=0)
+        wait(lambda: drive["sitting"] >= SITTING or watch.status.split()[1] == "collided"
+             or (watch.time or 0.0) > scenario.max_time, 60, "the demonstration drive")
+        drive["active"] = False
+        joy.publish(Joy(axes=[0.0] * 8, buttons=[0] * 11))      # let go of the stick
+        press(joy, B)
         wait(lambda: not watch.recording, 10, "recording to stop")
-        print(f"  demo {k + 1}: from ({start[0]:.2f}, {start[1]:.2f}) {len(plan)} steps, "
-              f"status {watch.status.split()[1]}", flush=True)
+        print(f"  demo {k + 1}: from ({start[0]:.2f}, {start[1]:.2f}), status {watch.status.split()[1]}",
+              flush=True)
     watch.on_step = None
 
 
@@ -116,6 +125,7 @@ def drive(demo, scenario, watch, reset, reward_file):
     controller = demo.launch("lfd_controller", "controller.launch", reward_file=str(reward_file),
                              scenario="static_obstacle", seed=9, time_scale=2.0, **FRAMES)
     controller.wait_for_topics([NS + "/reward_controller/cycle_time"], timeout=60)
+    controller.wait_for_services([NS + "/unicycle_sim/reset"], timeout=60)     # the new simulator
     cycles = []
     sub = rospy.Subscriber(NS + "/reward_controller/cycle_time", rospy.AnyMsg,
                            lambda m: cycles.append(time.monotonic()), queue_size=50)
@@ -141,36 +151,36 @@ def drive(demo, scenario, watch, reset, reward_file):
 
 
 def run(demo) -> None:
-    from lfd_controller.expert import true_reward
-    from lfd_controller.learning import load_reward
+    from lfd_controller.learn_reward import learn_from_sources
     from lfd_controller.plots import plot_trajectories
-    from lfd_controller.ros_learning import learn_from_sources
+    from lfd_controller.sim import PERSON_MAPPING
     from robot_sim.scenarios import load_scenario
 
     scenario = load_scenario("static_obstacle")
     out = demo.output / "lfd"
     session = f"demo_{time.strftime('%Y%m%d_%H%M%S')}"   # learn from this run's demos only
-    # Recording runs in real time, as with a person at the joystick: the scripted teleoperator
-    # answers each simulator step, and on a busy machine 2x left it too little time to keep up.
+    # Recording runs in real time, as with a person at the joystick (the simulated person answers
+    # each simulator step).
     launch = demo.launch("lfd_controller", "teleop_record.launch", scenario="static_obstacle", seed=5,
                          time_scale=1.0, bag_dir=str(out / "bags"), db_url=demo.db_url,
-                         source="synthetic_expert", session_id=session, scale_linear=0.9,
-                         scale_angular=3.0, **FRAMES)
+                         source=f"person:{FAMILY}", session_id=session,
+                         scale_linear=PERSON_MAPPING.scale_linear,
+                         scale_angular=PERSON_MAPPING.scale_angular, **FRAMES)
     launch.wait_for_services([NS + "/demo_recorder/start", NS + "/unicycle_sim/reset"], timeout=60)
     launch.wait_for_subscribers([NS + "/joy"], timeout=30)
     joy = rospy.Publisher(NS + "/joy", Joy, queue_size=20)
     reset = rospy.ServiceProxy(NS + "/unicycle_sim/reset", Trigger)
     watch = Watch()
     wait(lambda: joy.get_num_connections() > 0 and watch.state is not None, 20, "teleop and simulator")
-    print(f"  recording {DEMOS} demonstrations of {STEPS} steps through Joy -> joy_teleop -> "
+    print(f"  recording {DEMOS} person-like demonstrations through Joy -> joy_teleop -> "
           f"unicycle_sim -> demo_recorder (bags + CouchDB)", flush=True)
-    record_demos(demo, scenario, joy, watch, reset)
+    record_demos(scenario, joy, watch, reset)
+    # the person pipeline; a reward whose controller does not drive like the person is still
+    # saved here (accept_mismatch) so the chapter can show it, and the summary says so
     summary = learn_from_sources([], demo.db_url, scenario="static_obstacle", session_id=session,
-                                 output=str(out / "reward.yaml"), plots=str(out))
+                                 kind="person", output=str(out / "reward.yaml"), plots=str(out),
+                                 trim_steps=0, accept_mismatch=True)
     print("  " + summary.replace("\n", "\n  "), flush=True)
-    learned, truth = load_reward(out / "reward.yaml").weights, true_reward().weights
-    cosine = learned @ truth / np.linalg.norm(learned) / np.linalg.norm(truth)
-    print(f"  cosine(learned, true weights) = {cosine:.3f}")
     demo.stop(launch)      # the recording set-up; the controller gets a fresh simulator at 2x
     watch.close()
     watch = Watch()
