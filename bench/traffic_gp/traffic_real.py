@@ -30,8 +30,10 @@ release.
 Writes artifacts/bench/traffic_real.json and prints the table (markdown).
 
   python bench/traffic_gp/traffic_real.py [--quick] [--sets akl,sim:generated:0,...] [--out-name N]
+  python bench/traffic_gp/traffic_real.py --merge N1 N2 ...   (one table of runs made apart)
 """
 import argparse
+import json
 import logging
 import sys
 import time
@@ -237,11 +239,19 @@ def main(argv=None) -> int:
     parser.add_argument("--steps", type=int, default=None)
     parser.add_argument("--inducing", type=int, default=None)
     parser.add_argument("--out-name", default="traffic_real", help="JSON file name")
+    parser.add_argument("--merge", nargs="*", help="only print the table of these JSON files "
+                                                   "(runs of single sets, e.g. in parallel)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="  %(message)s")
     logging.getLogger("traffic_gp").setLevel(logging.INFO)      # the fit's stages as progress
     args.steps = args.steps or (400 if args.quick else 1500)
     args.inducing = args.inducing or (150 if args.quick else 400)
+    if args.merge:
+        results = {}
+        for name in args.merge:
+            results.update(json.loads((tc.OUT / f"{name}.json").read_text())["sets"])
+        print(table(results))
+        return 0
     names = [s for s in args.sets.split(",") if s] or (
         ["akl"] + [f"sim:{spec}" for spec in tc.maps(args.quick)])
     print(f"traffic_real: {tc.machine_note()}; GP at most {args.steps} steps, "
@@ -252,10 +262,10 @@ def main(argv=None) -> int:
         data = akl_set(args.quick) if name == "akl" else sim_set(name[4:], args.quick)
         label = name if name == "akl" else "sim " + tc.map_name(name[4:])
         results[label] = run_set(label, data, args)
+        tc.write_json(args.out_name, {"args": vars(args), "targets": {      # after each set
+            "ratio": RATIO_TARGET, "coverage": COVER}, "sets": results, "table": table(results)})
     print("\n" + table(results))
     print(f"\nwhole run {time.perf_counter() - started:.0f} s")
-    tc.write_json(args.out_name, {"args": vars(args), "targets": {
-        "ratio": RATIO_TARGET, "coverage": COVER}, "sets": results, "table": table(results)})
     return 0
 
 

@@ -123,7 +123,8 @@ def test_numpy_posterior_of_a_saved_model_predicts_what_gpflow_predicts(small_wo
     sim, obs = small_world
     model = {"space x day + space x hour x day": fitted,
              "space x day": TrafficGP(n_inducing=30, hourly=False, n_steps=40, batch_size=512,
-                                      likelihood="negbin", profile="none", refit_steps=0),
+                                      likelihood="negbin", profile="none", fallback=False,
+                                      calibrate=False, refit_steps=0),
              "with the weekly terms": TrafficGP(n_inducing=30, weekly=True, n_steps=40,
                                                 batch_size=512, likelihood="poisson",
                                                 profile="none", fallback=False,

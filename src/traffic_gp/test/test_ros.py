@@ -47,7 +47,7 @@ def test_learns_from_simulated_robots_and_serves_a_crowd_costmap(roslaunch, rosp
 
     model_path = tmp_path / "crowd.npz"
     launch = roslaunch(str(CROWD_SIM), seed=0, time_scale=600, rate=10,
-                       min_rows=1500, initial_steps=10, publish_period=1.0,
+                       min_rows=1500, initial_steps=10, refit_growth=0, publish_period=1.0,
                        model_path=str(model_path))
     launch.wait_for_services([f"{NODE}/predict_count", f"{NODE}/predict_region"], timeout=90)
     count, region = services(rospy)

@@ -33,8 +33,13 @@ class TrafficServerParams(CentralSourceParams):
     dwell_time: float = param(20.0, "s; counts over a watch of d seconds: exposure x "
                                     "(1 + d / dwell_time)")
     min_rows: int = param(2000, "observation rows before the first fit")
-    initial_steps: int = param(600, "maximum training steps of the first fit (after its "
-                                    "choice of settings on the most recent days)")
+    initial_steps: int = param(600, "maximum training steps of a fit from scratch (the first "
+                                    "and each refit; after its choice of settings on the most "
+                                    "recent days)")
+    refit_growth: float = param(2.0, "fit afresh (settings, served forecaster and intervals "
+                                     "chosen again on the most recent days) whenever the rows "
+                                     "have grown this many times since the last fit; 0: never",
+                                minimum=0.0)
     train_period: float = param(2.0, "s between training rounds")
     chunk_steps: int = param(20, "training steps per lock hold (services wait at most one chunk)")
     publish_period: float = param(5.0, "s between cost map publications")

@@ -66,7 +66,8 @@ class TrafficServer:
       ~model ({}: dict of TrafficGP keyword arguments).
     The first fit (once ~min_rows rows are in) is `TrafficGP.fit`: it holds out the most recent
       days, chooses the settings on them, serves FreMEn or the binned mean where they forecast
-      those days better and calibrates the intervals; later rows are folded in online.
+      those days better and calibrates the intervals; later rows are folded in online, and the
+      whole fit is made again on all rows whenever they have grown ~refit_growth (2) times.
       ~source ("topic": the `people_counts` topic; "central": the `_changes` feed of the central
       fleet database ~central_url, PeopleCount message documents of every robot, optionally of
       ~central_topics only), ~central_credentials_file.
@@ -99,6 +100,7 @@ class TrafficServer:
         self.feed_seq: Any = None                         # central feed position of the model
         self._pending_seq: Any = None
         self.follower: Optional[ChangesFollower] = None
+        self._full_fit_rows = 0                           # rows of the last fit from scratch
 
     # ---- set-up -------------------------------------------------------------------------
     def setup(self) -> None:
@@ -130,6 +132,7 @@ class TrafficServer:
         is loaded by the training thread when new observations arrive."""
         start = time.perf_counter()
         self.model = PosteriorSnapshot.load(path)
+        self._full_fit_rows = self.model.n_rows_
         rospy.loginfo(f"traffic_gp: loaded {path} ({self.model.n_steps_} steps, "
                       f"{self.model.n_rows_} rows) in {time.perf_counter() - start:.2f} s")
 
@@ -256,10 +259,7 @@ class TrafficServer:
             with self._lock:
                 self.model = trainable
         if self.model is None:
-            # the first fit: choices on the most recent days, outside the lock (no model is
-            # served yet); raises: the rows stay pending
-            model = TrafficGP(**self.config.model).fit(new, n_steps=self.config.initial_steps,
-                                                       cells=self.cells)
+            model = self._full_fit(new)       # raises: the rows stay pending
             with self._lock:
                 self.model = model
                 self._commit_learned()
@@ -271,6 +271,13 @@ class TrafficServer:
             self.model.partial_fit(new, n_steps=0)
             self._commit_learned()
         self._pending = []
+        growth = self.config.refit_growth
+        if growth > 1.0 and self.model.n_rows_ >= growth * max(self._full_fit_rows, 1):
+            model = self._full_fit(self.model.data_)      # the old model serves meanwhile
+            with self._lock:
+                self.model = model
+            rospy.loginfo(f"traffic_gp: fitted afresh: {model.status()}")
+            return
         for done in range(0, steps, self.config.chunk_steps):
             if self._stop.is_set():
                 return
@@ -279,6 +286,14 @@ class TrafficServer:
                                        n_steps=min(self.config.chunk_steps, steps - done))
         rospy.loginfo_throttle(30, f"traffic_gp: {self.model.n_rows_} rows, "
                                    f"{self.model.n_steps_} steps, ELBO {self.model.elbo_[-1]:.0f}")
+
+    def _full_fit(self, rows: Observations) -> TrafficGP:
+        """`TrafficGP.fit` on `rows` (choices on the most recent days, the baselines, the
+        intervals), outside the lock: services answer from the model they have meanwhile."""
+        model = TrafficGP(**self.config.model).fit(rows, n_steps=self.config.initial_steps,
+                                                   cells=self.cells)
+        self._full_fit_rows = len(rows)
+        return model
 
     def _commit_learned(self) -> None:
         """The pending rows are in the model now (call with the lock held)."""
