@@ -160,11 +160,16 @@ def test_the_original_readme_commands(roslaunch, rospy_node, workspace_root, mon
         wait_until(lambda: len(collector.got) >= expected, 120, what=f"{expected} messages replayed")
     except TimeoutError as err:
         raise AssertionError(f"{err}; got {len(collector.got)}\n{retriever.log_tail()}") from None
-    first = [(topic, list(LaserScan().deserialize(raw).ranges) if topic == "/scan_mongo"
-              else Odometry().deserialize(raw).pose.pose.position.x) for topic, raw in collector.got[:5]]
-    assert first == [("/scan_mongo", [1.0, 1.0]), ("/odom_mongo", 7.0), ("/scan_mongo", [2.0, 2.0]),
-                     ("/odom_mongo", 8.0), ("/scan_mongo", [3.0, 3.0])]  # OtherRobot's left out
-    samples = [LaserScan().deserialize(raw) for _, raw in collector.got[5:expected]]
+    # per topic in recorded order (two topics' subscriber connections may deliver out of step on a
+    # busy machine, so the order across topics is not compared); OtherRobot's left out
+    scan_bytes = [raw for topic, raw in collector.got if topic == "/scan_mongo"]
+    odoms = [Odometry().deserialize(raw).pose.pose.position.x for topic, raw in collector.got
+             if topic == "/odom_mongo"]
+    assert [list(LaserScan().deserialize(raw).ranges) for raw in scan_bytes[:3]] == \
+        [[1.0, 1.0], [2.0, 2.0], [3.0, 3.0]]
+    assert odoms == [7.0, 8.0]
+    samples = [LaserScan().deserialize(raw) for raw in scan_bytes[3:]]
+    assert len(samples) == 20
     assert all(list(s.ranges) == [10.0, 10.0, 20.0, 20.0, 10.0] and s.angle_max == 100.0 for s in samples)
     # SensorData.srv: the same messages in the original's flat form
     retriever.wait_for_services(["/ros_mongo_retriever/sensor_data"], timeout=90)

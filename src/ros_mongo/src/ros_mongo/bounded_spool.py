@@ -70,7 +70,7 @@ class BoundedSpool:
         min_free_bytes: free space every append must leave on the file system.
         policy: which topics are droppable.
         segment_bytes: size at which a new droppable segment is started (default max_bytes / 16,
-            at least 1 MiB).
+            at least 256 KiB): what is dropped at once when the spool is full.
         fsync: fsync every append.
     """
 
@@ -83,7 +83,7 @@ class BoundedSpool:
         self.path = Path(path)
         self.max_bytes, self.min_free_bytes, self.fsync = int(max_bytes), int(min_free_bytes), fsync
         self.policy = policy or DropPolicy()
-        self.segment_bytes = int(segment_bytes or max(1 << 20, self.max_bytes // 16))
+        self.segment_bytes = int(segment_bytes or max(256 << 10, self.max_bytes // 16))
         self.kept = Spool(self.path, fsync=fsync, max_bytes=_UNLIMITED, min_free_bytes=min_free_bytes)
         self.segments: List[Tuple[int, Spool]] = []
         self.dropped: Dict[str, int] = {}   # messages dropped per topic (this process)
