@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """ros_mongo benchmark, everything in one run on this machine:
 
-    scripts/in_env.sh python bench/ros_mongo/ros_mongo_bench.py          # about 25 min
+    scripts/in_env.sh python bench/ros_mongo/ros_mongo_bench.py          # about 30 min
     scripts/in_env.sh python bench/ros_mongo/ros_mongo_bench.py --quick  # a 5 min smoke run
 
 The standard load (bench_publisher.py): 1 kHz nav_msgs/Odometry, 30 Hz 640x480 rgb8 Image, 40 Hz
