@@ -35,18 +35,18 @@ from typing import Deque, Dict, List, Optional, Sequence, Tuple
 
 import genpy
 
-import ros_mongo.msgtypes as msgtypes
 from ros_mongo.bounded_spool import BoundedSpool
 from ros_mongo.decoding import DecodePolicy
-from ros_mongo.errors import DocumentsRejected, SpoolError, StoreError, UnknownTypeError
+from ros_mongo.errors import DocumentsRejected, SpoolError, StoreError
 from ros_mongo.quarantine import Quarantine
-from ros_mongo.records import MessageRecord, TopicInfo, make_record, new_message_id, record_from_bytes
+from ros_mongo.record_builder import Key as _Key
+from ros_mongo.record_builder import RecordBuilder
+from ros_mongo.records import MessageRecord, TopicInfo
 from ros_mongo.store import MessageStore
 
 __all__ = ["Recorder", "ITEM_OVERHEAD"]
 
 log = logging.getLogger(__name__)
-_Key = Tuple[str, str, str, str]  # topic, type, md5sum, publisher (callerid)
 
 #: Bytes a queued message costs beyond its payload (the bytes object, the queue entry, its tuple
 #: and numbers, measured with sys.getsizeof on CPython 3.8-3.11).
@@ -88,15 +88,14 @@ class Recorder:
                                      min_free_bytes=0)
         self.batch_size, self.batch_period = int(batch_size), float(batch_period)
         self.max_queue_bytes, self.retry_period = int(max_queue_bytes), float(retry_period)
-        self.session_id, self.robot_id, self.tags = session_id, robot_id, list(tags)
-        self.author = author or None
-        self.topic_tags = {topic: list(t) for topic, t in (topic_tags or {}).items()}
-        self.decode = decode or DecodePolicy()
+        self.session_id, self.robot_id = session_id, robot_id
         self._cond = threading.Condition()
         self._queue: Deque[tuple] = deque()
         self._queued_bytes = 0
         self._topics: Dict[_Key, TopicInfo] = {}
-        self._classes: Dict[_Key, Optional[type]] = {}
+        self.records = RecordBuilder(self._topics, decode=decode or DecodePolicy(), tags=tags,
+                                     topic_tags=topic_tags, session_id=session_id, robot_id=robot_id,
+                                     author=author, max_array_len=store.max_array_len)
         self._stopping = False
         self._deadline = float("inf")
         self._threads: List[threading.Thread] = []
@@ -134,7 +133,7 @@ class Recorder:
 
     def _spill(self, key: _Key, raw: bytes, receive: genpy.Time) -> bool:
         """Straight to the spool, undecoded (the fields are decoded when it is drained)."""
-        record = self._raw_record(key, raw, receive.secs, receive.nsecs)
+        record = self.records.raw(key, raw, receive.secs, receive.nsecs)
         with self._spill_lock:
             try:
                 self.spool.append([record], self._topics)
@@ -251,11 +250,11 @@ class Recorder:
     def _write(self, items: List[tuple], ticket: int) -> None:
         """Decode (in parallel with other writers), then write in ticket order."""
         try:
-            entries = [item[0] if len(item) == 1 else self._record(*item) for item in items]
+            entries = [item[0] if len(item) == 1 else self.records.record(*item) for item in items]
         except Exception as err:  # noqa: BLE001 - a decoding bug must not lose the batch
             log.exception("cannot decode a batch; storing it without decoded fields")
             self._set_fault(f"decoding failed: {type(err).__name__}: {err}")
-            entries = [item[0] if len(item) == 1 else self._raw_record(*item) for item in items]
+            entries = [item[0] if len(item) == 1 else self.records.raw(*item) for item in items]
         with self._order:
             while self._turn != ticket:
                 self._order.wait()
@@ -360,49 +359,6 @@ class Recorder:
         log.error("the database refused %d messages on their own merits (kept in %s): %s", len(refused),
                   self.quarantine.path, err)
 
-    def _raw_record(self, key: _Key, raw: bytes, secs: int, nsecs: int) -> MessageRecord:
-        return MessageRecord(new_message_id(secs, nsecs, self.robot_id), key[0], key[1], key[2], raw,
-                             secs, nsecs, tags=self._tags_of(key[0]),
-                             session_id=self.session_id, robot_id=self.robot_id, callerid=key[3],
-                             author=self.author)
-
-    def _record(self, key: _Key, raw: bytes, secs: int, nsecs: int) -> MessageRecord:
-        cls = self._message_class(key)
-        if cls is None:
-            return self._raw_record(key, raw, secs, nsecs)
-        return record_from_bytes(key[0], cls, raw, secs, nsecs, tags=self._tags_of(key[0]),
-                                 session_id=self.session_id, robot_id=self.robot_id,
-                                 max_array_len=self.store.max_array_len, callerid=key[3], author=self.author,
-                                 decode=self.decode.level(key[0], key[1]))
-
-    def _tags_of(self, topic: str) -> List[str]:
-        return [str(t) for t in self.tags + self.topic_tags.get(topic, [])]
-
-    def _message_class(self, key: _Key) -> Optional[type]:
-        if key not in self._classes:
-            info = self._topics[key]
-            try:
-                self._classes[key] = msgtypes.message_class(info.msg_type, info.md5sum, info.definition)
-            except UnknownTypeError as err:
-                log.warning("storing %s without decoded fields: %s", info.topic, err)
-                self._classes[key] = None
-        return self._classes[key]
-
-    def _complete(self, entries: list) -> None:
-        """Decode the fields of spooled records that went to the spool undecoded."""
-        for entry in entries:
-            if isinstance(entry, TopicInfo):
-                self._topics.setdefault((entry.topic, entry.msg_type, entry.md5sum, entry.callerid), entry)
-            elif entry.fields is None and entry.header_stamp is None:
-                key = (entry.topic, entry.msg_type, entry.md5sum, entry.callerid)
-                cls = self._message_class(key) if key in self._topics else None
-                if cls is not None:
-                    done = make_record(entry.topic, cls, entry.raw, record_id=entry.id,
-                                       receive=genpy.Time(entry.receive_secs, entry.receive_nsecs),
-                                       max_array_len=self.store.max_array_len,
-                                       decode=self.decode.level(entry.topic, entry.msg_type))
-                    entry.header_stamp, entry.fields = done.header_stamp, done.fields
-
     # -- faults ----------------------------------------------------------------------------------
     def _set_fault(self, text: str) -> None:
         self.fault = self.last_fault = text
@@ -439,7 +395,7 @@ class Recorder:
     def _drain_once(self) -> None:
         entries, token = self.spool.read(max_entries=self.batch_size, max_bytes=32 * 1024 * 1024)
         records = sum(isinstance(e, MessageRecord) for e in entries)
-        self._complete(entries)
+        self.records.complete(entries)
         try:
             self._store(entries)
         except StoreError as err:  # never skipped: the entries stay in the spool
