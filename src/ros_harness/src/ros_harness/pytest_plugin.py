@@ -158,16 +158,21 @@ def _start_xvfb(log_dir: Path):
     """Xvfb on the first free display number. Parallel test workers may pick the same number at
     once: Xvfb itself takes the display's lock file, and the loser exits, so try the next one."""
     for number in range(99, 200):
-        if Path(f"/tmp/.X{number}-lock").exists() or Path(f"/tmp/.X11-unix/X{number}").exists():
+        socket = Path(f"/tmp/.X11-unix/X{number}")
+        if Path(f"/tmp/.X{number}-lock").exists() or socket.exists():
             continue
         xvfb = ManagedProcess(["Xvfb", f":{number}", "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
                               name="Xvfb", log_path=log_dir / f"xvfb_{number}.log").start()
-        try:
-            wait_until(lambda: Path(f"/tmp/.X11-unix/X{number}").exists() or not xvfb.alive,
-                       START_TIMEOUT, what="Xvfb socket", check=None)
-        except TimeoutError:
-            xvfb.stop(timeout=5)
-            raise
-        if xvfb.alive:
+        if _wait_for_display(xvfb, socket):
             return xvfb, number
     raise HarnessError("no free X display number between :99 and :199")
+
+
+def _wait_for_display(xvfb: ManagedProcess, socket: Path) -> bool:
+    """True once Xvfb serves the display; False when it exited (the display was taken)."""
+    try:
+        wait_until(lambda: socket.exists() or not xvfb.alive, START_TIMEOUT, what="Xvfb socket")
+    except TimeoutError:
+        xvfb.stop(timeout=5)
+        raise
+    return xvfb.alive
