@@ -76,20 +76,20 @@ def test_demo_launch_brings_up_the_whole_stack_and_each_part_works(stack, rospy_
     #    train it says so instead of making up a number
     predict = rospy.ServiceProxy("/traffic_gp/predict_count", PredictCount)
 
-    def rows_seen():
-        """Observation rows taken in so far, or None once the model answers."""
+    def messages_received():
+        """PeopleCount messages received so far, or None once the model answers."""
         reply = predict(x=1.0, y=1.0, stamp=rospy.Time(0))
         if reply.success:
             assert reply.expected_count >= 0 and reply.lower <= reply.upper
             return None
-        found = re.search(r"\((\d+) observation rows", reply.message)
+        found = re.search(r"(\d+) PeopleCount messages received", reply.message)
         assert found, reply.message
         return int(found.group(1))
 
-    first = rows_seen()
+    first = messages_received()
     if first is not None:
         def grew() -> bool:
-            now = rows_seen()
+            now = messages_received()
             return now is None or now > first
 
         wait_until(grew, timeout=60, what="people-count observations arriving")

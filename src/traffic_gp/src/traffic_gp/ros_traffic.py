@@ -90,6 +90,7 @@ class TrafficServer:
         self.cells: Optional[CellGrid] = None
         self.model = None
         self.rows_seen = 0
+        self.messages_taken = 0         # PeopleCount messages taken from the inbox
         self.last_stamp = 0.0
         self._inbox = queue.Queue()     # PeopleCount messages from the subscriber thread
         self._pending: List[Observations] = []
@@ -229,6 +230,7 @@ class TrafficServer:
                 rospy.logwarn_throttle(10, f"traffic_gp: dropped a PeopleCount from "
                                            f"{msg.robot_id!r}: {err}")
                 continue
+            self.messages_taken += 1
             self._pending.append(rows)
             tally = self._pending_learned.setdefault(robot or "(no robot id)", [0, 0])
             tally[0] += len(rows)
@@ -337,8 +339,10 @@ class TrafficServer:
         if self.cells is None:
             raise TrafficError("no map yet")
         if self.model is None:
+            received = self.messages_taken + self._inbox.qsize()  # counts while a fit runs too
             raise TrafficError(f"no model yet ({self.rows_seen} observation rows so far, "
-                               f"{self.config.min_rows} needed)")
+                               f"{self.config.min_rows} needed; {received} PeopleCount "
+                               f"messages received)")
         return CrowdQueries(self.model, self.cells)
 
     def _predict_count(self, req):
