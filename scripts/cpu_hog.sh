@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Keep the machine's cores busy, to check that the test suite passes on a loaded machine (a robot's
-# computer is never quiet; issue 16). Starts N busy loops at normal priority (`nice -n 0`, N
+# computer is never quiet). Starts N busy loops at normal priority (`nice -n 0`, N
 # defaults to 2 = the cores of the reference machine) and stops them, by process id, when it ends.
 #
 #   scripts/cpu_hog.sh make test            # hog while the command runs; exits with its status

@@ -1,4 +1,4 @@
-"""Every package.xml names what its Python code imports, so `rosdep install` equips a robot (issue 16).
+"""Every package.xml names what its Python code imports, so `rosdep install` equips a robot.
 
 Read from the source (the AST of every Python file of a package: src/, nodes/, scripts/, test/,
 setup.py), each third-party top-level import must be covered in that package's package.xml:

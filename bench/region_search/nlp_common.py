@@ -12,13 +12,13 @@ DATA = Path(__file__).resolve().parent / "data"
 # The leave-one-building-out phrase sets (five buildings' label sets; written before any run).
 LOBO_FILE = DATA / "lobo_buildings.yaml"
 EVAL_FILE = DATA / "region_eval.yaml"
-# Phrases over the labels of a real floor (GRASP-ML's Towne/Levine labels): since issue 18 a dev
+# Phrases over the labels of a real floor (GRASP-ML's Towne/Levine labels): a dev
 # set (the settings are chosen on it and on region_eval.yaml).
 REAL_EVAL_FILE = DATA / "region_eval_real.yaml"
-# Issue 18's first held-out test set (149 phrases over the same floor); run once, its misses were
-# read, so since the second round of issue 18 it is a dev set too.
+# The first held-out test set (149 phrases over the same floor); run once, its misses were
+# read, so it has been a dev set since.
 REAL_TEST_FILE = DATA / "region_test_real.yaml"
-# The held-out test set of issue 18's second round: 168 new phrases over the same floor, written
+# The second held-out test set: 168 new phrases over the same floor, written
 # before anything was run on them; never used for a choice (run once, at the end).
 REAL_TEST_2_FILE = DATA / "region_test_real_2.yaml"
 # Label descriptions (what a visitor's sign says), for label files we cannot edit: by label file.
@@ -91,7 +91,7 @@ def load_real_eval(path: Path = REAL_EVAL_FILE) -> Dict[str, dict]:
 def load_dev_sets(with_first_test: bool = True) -> Dict[str, Dict[str, dict]]:
     """The phrase sets settings are chosen on, every query marked `dev`: the earlier real-floor
     phrases (region_eval_real.yaml), all of region_eval.yaml (five other buildings) and, since
-    issue 18's second round (`with_first_test`), the first real-floor test set
+    the second held-out set (`with_first_test`), the first real-floor test set
     (region_test_real.yaml, whose answers have been seen)."""
     sets = {"real floor dev (region_eval_real.yaml)": load_real_eval(REAL_EVAL_FILE),
             "region_eval.yaml (all)": load_eval()}

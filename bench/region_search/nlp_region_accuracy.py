@@ -13,7 +13,7 @@ offset, no-match threshold: ranking_fit.choose) is chosen on the other four and 
 Reported per backend: forced top-1 on the phrases that have a place, the share of all phrases
 answered right with the "no labelled place matches" answer, its recall on phrases without a
 place and how often a phrase with a place got it; with and without descriptions; the ranking
-of the previous release (issue-18 methods, fixed settings) on the same phrases for comparison.
+of the previous release (its methods, fixed settings) on the same phrases for comparison.
 Also on the earlier real-floor phrase sets (data/region_*.yaml; no setting is chosen on them),
 with the settings chosen on all five buildings.
 `--write-weights` writes those all-building settings to
@@ -121,7 +121,7 @@ def other_sets(recommender: PlaceRecommender, weights: RankingWeights) -> dict:
 
 
 def previous_release(backend: str, embeddings, wordnet, buildings: dict) -> dict:
-    """Forced top-1 of the issue-18 ranking on the phrases that have a place."""
+    """Forced top-1 of the previous release's ranking on the phrases that have a place."""
     if backend == "sentence":
         recommender = PhraseRegionRecommender(embeddings.embed_phrases, wordnet=wordnet)
     else:

@@ -1,4 +1,4 @@
-"""Issue 18, second round: numbers said as words, label descriptions (label-file field and
+"""Numbers said as words, label descriptions (label-file field and
 sidecar file) in both ranking methods.
 The expected answers are written by hand from the phrases, not recorded from the code."""
 import json

@@ -124,7 +124,7 @@ def test_numbers_as_text_only_confuse_rooms_that_differ_by_number(sentence, buil
 @pytest.mark.wordnet
 def test_name_share_and_spelling_find_the_real_floors_names(sentence, shared_data_dir):
     """Dev phrases (bench/data/region_eval_real.yaml) the phrase method missed before it had the
-    bare-name share and the name-spelling match (issue 18): WordNet's senses of "far" (FAR, an
+    bare-name share and the name-spelling match: WordNet's senses of "far" (FAR, an
     army) had drowned "levine far corner"."""
     labels = json.loads((shared_data_dir / "maps" / "towne_levine_labels.json").read_text())
     floor = [Region(name, pose["x"], pose["y"]) for name, pose in sorted(labels.items())]

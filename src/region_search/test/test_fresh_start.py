@@ -1,4 +1,4 @@
-"""The Python 3.8 / no-PyTorch configuration from nothing, through ROS (issue 18).
+"""The Python 3.8 / no-PyTorch configuration from nothing, through ROS.
 
 Real nodes through region_search.launch / embedding_server.launch with `backend:=word2vec` and
 an EMPTY cache folder, the shipped word2vec settings (`source` auto: Brown + WordNet glosses when

@@ -255,7 +255,7 @@ def test_label_descriptions_from_the_label_file_and_a_descriptions_file(roslaunc
                                                                          files):
     """Names that say nothing ("place_a"); what each place is comes from its description: a
     label file's "description" field, and ~descriptions_path (its entries win), re-read when it
-    changes (issue 18)."""
+    changes."""
     labels = files / "opaque_labels.json"
     labels.write_text('{"place_a": {"x": 1, "y": 1, "description": "the printer room"},'
                       ' "place_b": {"x": 2, "y": 2}, "place_c": {"x": 3, "y": 3}}')

@@ -3,7 +3,7 @@ cluster timeouts and quorum, cut-off bodies, latency, a reverse proxy's path pre
 
 These answers come from ros_harness.fault_proxy: a REAL process on its own port in front of a real
 pouchdb-server, answering with the exact status and JSON bodies a real CouchDB 3.5 gave (as
-measured and written down in the team's database notes), switched on and off while the real
+measured against one), switched on and off while the real
 recorder node (roscore + roslaunch) runs. Expected values come from what the test published, never
 from the code under test.
 """

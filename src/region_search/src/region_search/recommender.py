@@ -13,7 +13,7 @@
   label's (weighted) words, by embedding cosine or by spelling (label-name words only: "towne",
   room numbers); the score is the SIF-weighted mean of these matches over the query's words.
   A share of it (`name_text_weight`, 0.3, chosen on the dev phrases by
-  bench/nlp_region_accuracy.py --dev2; 0.5 in issue 18's first round) is this score on the
+  bench/nlp_region_accuracy.py --dev2; 0.5 before) is this score on the
   label's name words alone, so that WordNet's senses of a name ("grasp", "far") do not drown
   the name itself.
   Word vectors come from a callable (the embedding service's client, or a model in-process).
