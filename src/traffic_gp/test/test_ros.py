@@ -46,9 +46,14 @@ def test_learns_from_simulated_robots_and_serves_a_crowd_costmap(roslaunch, rosp
     from std_srvs.srv import Trigger
 
     model_path = tmp_path / "crowd.npz"
+    # the whole first fit runs (its choice of settings, baselines, calibration), with a small
+    # model, short candidate fits and short online rounds: what each choice gives is the model
+    # tests' subject, not this one's
     launch = roslaunch(str(CROWD_SIM), seed=0, time_scale=600, rate=10,
                        min_rows=1500, initial_steps=10, refit_growth=0, publish_period=1.0,
-                       model_path=str(model_path))
+                       model_path=str(model_path), n_inducing=60,
+                       model="{screen_steps: 30, screen_inducing: 30, screen_rows: 3000, "
+                             "online_steps: 10}")
     launch.wait_for_services([f"{NODE}/predict_count", f"{NODE}/predict_region"], timeout=90)
     count, region = services(rospy)
     # the first fit chooses its settings on the most recent observations (short candidate fits),

@@ -19,6 +19,7 @@ from robot_common.errors import ModelError, TaskError
 from robot_common.ros_node import odom_state, read_config, ros_home
 from robot_common.tasks import scenario_from_yaml
 from ros_mongo import StoreError, open_store
+from ros_mongo.urls import warn_password_in_url
 
 
 def resolve_bag_dir(value: str) -> Optional[Path]:
@@ -169,4 +170,6 @@ class DemoRecorderNode:
 
 def start() -> DemoRecorderNode:
     """The node's start-up: ~parameters -> recorder -> ROS wiring (ConfigError on a bad one)."""
-    return DemoRecorderNode(read_config(DemoRecorderParams)).setup()
+    config = read_config(DemoRecorderParams)
+    warn_password_in_url(config.db_url)  # roslaunch prints parameters: say so at once
+    return DemoRecorderNode(config).setup()

@@ -25,7 +25,7 @@ from robot_common.ros_maps import grid_to_msg, msg_to_grid
 from robot_common.ros_node import read_config
 from ros_mongo.changes import ChangesFollower
 from ros_mongo.errors import StoreError
-from ros_mongo.urls import redact_url
+from ros_mongo.urls import redact_url, warn_password_in_url
 from traffic_gp.errors import TrafficError
 from traffic_gp.model import TrafficGP
 from traffic_gp.observations import Observations, aggregate_view, hours_since_monday
@@ -425,6 +425,8 @@ class TrafficServer:
 
 def start() -> TrafficServer:
     """Read the node's parameters, build the server and wire it to ROS (after init_node)."""
-    server = TrafficServer(read_config(TrafficServerParams))
+    config = read_config(TrafficServerParams)
+    warn_password_in_url(config.central_url)  # roslaunch prints parameters: say so at once
+    server = TrafficServer(config)
     server.setup()
     return server
