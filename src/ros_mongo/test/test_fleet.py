@@ -4,9 +4,7 @@ Real processes only: one pouchdb-server per robot plus a central one (ros_harnes
 (one per robot, as on real robots) and the nodes through roslaunch (launch/fleet.launch). Counts
 and ids are read from the stores, never built here.
 """
-import json
 import re
-import sys
 import uuid
 from pathlib import Path
 from urllib.parse import unquote
@@ -15,11 +13,12 @@ import pytest
 import requests
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray
+from fleet_helpers import FleetRobot, all_docs, content, messages
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Image
 from std_srvs.srv import Trigger
 
-from ros_harness import LaunchSet, ManagedProcess, PouchDBServer, RosCore, wait_until
+from ros_harness import LaunchSet, PouchDBServer, RosCore, wait_until
 from ros_mongo import open_store
 from ros_mongo.replication import (
     POUCHDB_BATCH_SIZE,
@@ -32,31 +31,7 @@ from ros_mongo.retention import Retention
 
 FIRST = 3 * POUCHDB_BATCH_SIZE  # messages replicated before central stops
 
-HERE = Path(__file__).resolve().parent
 LONG = 300.0  # seconds: generous, the machine is busy
-
-
-def all_docs(db_url):
-    """Every document of a database (attachment stubs only), with `_conflicts` where any."""
-    docs, start = [], None
-    while True:
-        params = {"include_docs": "true", "conflicts": "true", "limit": "501"}
-        if start is not None:
-            params["startkey"] = json.dumps(start)
-        rows = requests.get(db_url + "/_all_docs", params=params, timeout=60).json()["rows"]
-        docs += [row["doc"] for row in rows[:500]]
-        if len(rows) <= 500:
-            return docs
-        start = rows[500]["id"]
-
-
-def messages(docs):
-    return [d for d in docs if d.get("kind") == "message"]
-
-
-def content(doc):
-    """What a message is, read from its stored fields: (robot, topic, index sent in frame_id)."""
-    return doc["robot_id"], doc["topic"], int(doc["msg"]["header"]["frame_id"])
 
 
 def count_messages(db_url):
@@ -344,7 +319,7 @@ def test_replicator_reports_lag_and_obeys_start_stop_trigger(roslaunch, rospy_no
 
 # -- robots with local stores, central and local outages ---------------------------------------------------
 
-class Robot:
+class Robot(FleetRobot):
     """One robot: its own roscore, local store and fleet.launch."""
 
     def __init__(self, index, work: Path, central_url, workspace_root):
@@ -362,25 +337,8 @@ class Robot:
                                     spool_path=str(self.work / "recorder.spool"))
         self.publisher = None
 
-    def publish(self, count, rate, hold_at):
-        self.go_file = self.work / "go"
-        self.publisher = ManagedProcess(
-            [sys.executable, str(HERE / "fleet_publisher.py"), "--count", count, "--rate", rate,
-             "--hold-at", hold_at, "--go-file", self.go_file],
-            name=f"publisher {self.robot_id}", log_path=self.work / "publisher.log",
-            env=self.core.env()).start()
-
-    def published(self):
-        for line in self.publisher.log_path.read_text().splitlines():
-            if line.startswith("{"):
-                return json.loads(line)["published"]
-        raise AssertionError(f"no counts from the publisher: {self.publisher.log_tail()}")
-
     def close(self):
-        if self.publisher is not None:
-            self.publisher.stop()
-        self.launches.stop_all()
-        self.core.stop()
+        super().close()
         self.store.stop()
 
 

@@ -8,18 +8,15 @@ roscores (one per robot), the recorders through roslaunch, and the fleet test pu
 outage is the real central server stopped; one robot is restarted in the middle of it. What was
 published is counted by the publishers; what central holds is read from central by content.
 """
-import json
-import sys
 from pathlib import Path
 
 import pytest
 import requests
-from test_fleet import all_docs, content, messages
+from fleet_helpers import FleetRobot, all_docs, content, messages
 
-from ros_harness import FaultProxy, LaunchSet, ManagedProcess, PouchDBServer, RosCore, wait_until
+from ros_harness import FaultProxy, LaunchSet, PouchDBServer, RosCore, wait_until
 from ros_mongo.changes import ChangesFollower
 
-HERE = Path(__file__).resolve().parent
 LONG = 300.0  # seconds: generous, the machine is busy
 CREDENTIALS = "robot:s3cret"
 
@@ -35,7 +32,7 @@ def central_counts(admin_url):
         return {}
 
 
-class DirectRobot:
+class DirectRobot(FleetRobot):
     """One robot: its own roscore and fleet.launch in its default (direct) form."""
 
     def __init__(self, index, work: Path, central_url, credentials_file, workspace_root):
@@ -59,25 +56,6 @@ class DirectRobot:
         path = self.work / "recorder.spool"
         return path.stat().st_size if path.exists() else 0
 
-    def publish(self, count, rate, hold_at):
-        self.go_file = self.work / "go"
-        self.publisher = ManagedProcess(
-            [sys.executable, str(HERE / "fleet_publisher.py"), "--count", count, "--rate", rate,
-             "--hold-at", hold_at, "--go-file", self.go_file],
-            name=f"publisher {self.robot_id}", log_path=self.work / "publisher.log",
-            env=self.core.env()).start()
-
-    def published(self):
-        for line in self.publisher.log_path.read_text().splitlines():
-            if line.startswith("{"):
-                return json.loads(line)["published"]
-        raise AssertionError(f"no counts from the publisher: {self.publisher.log_tail()}")
-
-    def close(self):
-        if self.publisher is not None:
-            self.publisher.stop()
-        self.launches.stop_all()
-        self.core.stop()
 
 
 @pytest.mark.ros
