@@ -163,7 +163,10 @@ def test_retriever_replays_exact_bytes_with_recorded_timing(roslaunch, db_url, r
     header = collector.got["/detections_mongo"][0][2]
     assert header["type"] == "lab_msgs/Detection" and header["md5sum"] == custom_message()._md5sum
     odom_times = [t for t, _, _ in collector.got["/odom_mongo"]]
-    assert odom_times[-1] - odom_times[0] >= 39 * 0.05 / 2.0 - 0.005  # never ahead of the schedule
+    # at rate 2 the 40 messages 0.05 s apart take 0.975 s; these are receive times, so a late first
+    # delivery on a busy machine shortens the span (the replay's own timing: the benchmark); a
+    # replay that ignored the recorded timing (everything at once, or twice as fast) falls far short
+    assert odom_times[-1] - odom_times[0] >= 0.75 * 39 * 0.05 / 2.0
     assert stop().message == "nothing was playing"
     collector.close()
 
