@@ -88,7 +88,6 @@ class Recorder:
                                      min_free_bytes=0)
         self.batch_size, self.batch_period = int(batch_size), float(batch_period)
         self.max_queue_bytes, self.retry_period = int(max_queue_bytes), float(retry_period)
-        self.session_id, self.robot_id = session_id, robot_id
         self._cond = threading.Condition()
         self._queue: Deque[tuple] = deque()
         self._queued_bytes = 0
@@ -120,7 +119,7 @@ class Recorder:
             self._counts["received"] += 1      # one key, only ever written under _cond
             if key not in self._topics:
                 info = TopicInfo(topic, msg_type, md5sum, definition, bool(latching), callerid,
-                                 self.robot_id or "")
+                                 self.records.robot_id or "")
                 self._topics[key] = info
                 self._queue.append((info,))
             if self._queued_bytes + cost <= self.max_queue_bytes:
