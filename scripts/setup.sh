@@ -28,6 +28,8 @@ APT_PACKAGES=(
   rviz xvfb libgl1-mesa-dri imagemagick
   # WordNet glosses: the embedding corpus a fresh machine can always get
   wordnet-base
+  # what the real Apache CouchDB of ../shared/couchdb links against (its tests and benchmarks)
+  libicu72 libssl3
 )
 
 log() { printf '[setup] %s\n' "$*"; }
