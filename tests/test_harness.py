@@ -145,3 +145,14 @@ def test_a_stopped_server_is_reported_dead(own_db_server):
     own_db_server.stop()
     with pytest.raises(ProcessDied):
         own_db_server.process.check_alive()
+
+
+def test_the_real_couchdb_is_skipped_with_its_reason_where_the_shared_folder_is_absent(tmp_path):
+    from ros_harness import ApacheCouchDB, HarnessError
+    from ros_harness.apache_couchdb import missing_reason, shared_couchdb_dir
+
+    assert shared_couchdb_dir(tmp_path / "clone") == tmp_path / "shared" / "couchdb"
+    reason = missing_reason(tmp_path / "shared" / "couchdb")
+    assert "couchdb-node.sh is missing" in reason and "../shared/couchdb" in reason
+    with pytest.raises(HarnessError, match="is missing"):
+        ApacheCouchDB(tmp_path / "shared" / "couchdb", tmp_path / "work").start()

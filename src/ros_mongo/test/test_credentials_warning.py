@@ -50,6 +50,7 @@ def test_only_a_password_in_the_given_url_is_warned_about(caplog, tmp_path):
 
 
 @pytest.mark.db
+@pytest.mark.parametrize("couch_server", ["pouchdb"], indirect=True)  # the URL's own password only
 def test_a_reopened_store_does_not_warn_again(couchdb_url, caplog, tmp_path):
     """The replay loader reopens the store in another process with `reopen_args()`: its URL holds
     the password this process added, which must not look like a password given in a parameter."""
@@ -70,6 +71,7 @@ def _lines_with(text, path: Path):
 
 @pytest.mark.ros
 @pytest.mark.db
+@pytest.mark.parametrize("couch_server", ["pouchdb"], indirect=True)  # the URL's own password only
 def test_a_node_started_by_roslaunch_warns_once_and_never_shows_the_password(roslaunch, couchdb_url,
                                                                             rospy_node, roscore, tmp_path):
     from diagnostic_msgs.msg import DiagnosticArray

@@ -28,7 +28,7 @@ def publishers(path):
             for topic, _, _, header in iter_file(path)}
 
 
-def test_database_to_mcap_to_database_to_mcap_is_lossless(db_url, tmp_path):
+def test_database_to_mcap_to_database_to_mcap_is_lossless(db_server, db_url, tmp_path):
     source, first, second, back = (tmp_path / n for n in ("source.bag", "a.mcap", "b.mcap", "back.bag"))
     write_bag(source)
     with open_store(db_url) as store:
@@ -39,7 +39,7 @@ def test_database_to_mcap_to_database_to_mcap_is_lossless(db_url, tmp_path):
         assert store.count() == 56
     assert bag_contents(first) == bag_contents(source)
     assert publishers(first) == publishers(source)
-    with open_store(db_url + "_copy") as copy:
+    with open_store(db_server.database_url(db_url.rsplit("/", 1)[1] + "_copy")) as copy:
         assert import_file(first, copy, progress=False).messages == 56
         latched = [i for i in copy.topics() if i.topic == "/detections"]
         assert latched[0].latching and latched[0].callerid == "/detector"

@@ -1,4 +1,5 @@
 """Real ROS and database processes for tests, demos and benchmarks (no mocks)."""
+from ros_harness.apache_couchdb import ApacheCouchDB, CouchDBCluster
 from ros_harness.errors import HarnessError, ProcessDied
 from ros_harness.fault_proxy import FaultProxy
 from ros_harness.launching import LaunchSet
@@ -15,6 +16,8 @@ from ros_harness.processes import (
 )
 
 __all__ = [
+    "ApacheCouchDB",
+    "CouchDBCluster",
     "FaultProxy",
     "HarnessError",
     "ProcessDied",

@@ -453,11 +453,22 @@ def port_open(port: int) -> bool:
 
 
 def http_get_json(url: str, timeout: float = 30.0):
-    """GET a JSON document (used by tests that look at a CouchDB server directly)."""
+    """GET a JSON document (used by tests that look at a CouchDB server directly); credentials in
+    the URL (`http://user:pass@host/...`) go as basic authentication, never into an error."""
+    import base64
     import json
+    from urllib.parse import unquote, urlsplit, urlunsplit
 
+    parts = urlsplit(url)
+    headers = {}
+    if parts.username:
+        pair = f"{unquote(parts.username)}:{unquote(parts.password or '')}"
+        headers["Authorization"] = "Basic " + base64.b64encode(pair.encode()).decode()
+        netloc = parts.hostname + (f":{parts.port}" if parts.port else "")
+        url = urlunsplit(parts._replace(netloc=netloc))
     try:
-        with urllib.request.urlopen(url, timeout=timeout) as response:
+        request = urllib.request.Request(url, headers=headers)
+        with urllib.request.urlopen(request, timeout=timeout) as response:
             return json.loads(response.read().decode())
     except urllib.error.HTTPError as err:
         raise HarnessError(f"GET {url} answered {err.code}: {err.read()[:200]!r}") from err

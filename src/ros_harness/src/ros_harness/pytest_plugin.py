@@ -12,6 +12,12 @@ Fixtures (all tear down what they started, by process id):
   `db_url` (function, parametrised): the same test against both backends.
 - `own_couchdb_server`, `own_mongodb_server`, `own_db_server` (function; the last parametrised):
   a private server that the test may stop and restart (outage tests).
+- `apache_couchdb` (session): a real Apache CouchDB 3 node from ../shared/couchdb (skipped with the
+  reason where that folder is absent); `apache_couchdb_url` (function): a fresh database on it,
+  created by the admin, as the URL of its *member* account;
+  `couch_server` (parametrised "pouchdb", "apache"): the shared server of each kind (both have
+  `.url` for the test's own requests and `.database_url(name)` for the product);
+  `couchdb_cluster` (function): a real 3-node cluster the test may kill nodes of and restart.
 - `xvfb_display` (session): a virtual X display for rviz screenshots.
 - `workspace_root`: the repository root.
 Markers: `ros` (needs roscore), `db` (needs a database server), `rviz`, `slow`.
@@ -22,6 +28,7 @@ from pathlib import Path
 
 import pytest
 
+from ros_harness.apache_couchdb import ApacheCouchDB, CouchDBCluster, missing_reason, shared_couchdb_dir
 from ros_harness.errors import HarnessError
 from ros_harness.launching import LaunchSet
 from ros_harness.processes import (
@@ -144,6 +151,43 @@ def own_mongodb_server(tmp_path):
 def own_db_server(request):
     """A private server of each kind; `.database_url(name)` gives a database URL on it."""
     return request.getfixturevalue(f"own_{request.param}_server")
+
+
+@pytest.fixture(scope="session")
+def shared_couchdb(workspace_root) -> Path:
+    """The real Apache CouchDB release and scripts (../shared/couchdb); skips where absent."""
+    path = shared_couchdb_dir(workspace_root)
+    reason = missing_reason(path)
+    if reason:
+        pytest.skip(reason)
+    return path
+
+
+@pytest.fixture(scope="session")
+def apache_couchdb(shared_couchdb, tmp_path_factory):
+    """One real Apache CouchDB node for the whole run (one database per test)."""
+    server = ApacheCouchDB(shared_couchdb, tmp_path_factory.mktemp("apache_couchdb")).start()
+    yield server
+    server.stop()
+
+
+@pytest.fixture
+def apache_couchdb_url(apache_couchdb) -> str:
+    return apache_couchdb.database_url(_fresh_name())
+
+
+@pytest.fixture(params=["pouchdb", "apache"])
+def couch_server(request):
+    """The shared CouchDB-API server of each kind: pouchdb-server, then the real Apache CouchDB."""
+    return request.getfixturevalue("couchdb_server" if request.param == "pouchdb" else "apache_couchdb")
+
+
+@pytest.fixture
+def couchdb_cluster(shared_couchdb, tmp_path):
+    """A real 3-node Apache CouchDB cluster of this test's own (it may kill and restart nodes)."""
+    cluster = CouchDBCluster(shared_couchdb, tmp_path / "couchdb_cluster").start()
+    yield cluster
+    cluster.stop()
 
 
 @pytest.fixture(scope="session")

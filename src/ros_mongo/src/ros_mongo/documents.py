@@ -117,19 +117,29 @@ def _equal(name: str, value: Any) -> List[Dict[str, Any]]:
     return [{name: {"$eq": value}}, {name: {"$elemMatch": {"$eq": value}}}]
 
 
+def _none_of(name: str, values: List[Any]) -> Dict[str, Any]:
+    """"`name` equals none of `values`": a missing field qualifies (unless None is among them).
+    Apache CouchDB fails every condition on a missing field, `$not`/`$nor` ones too, so the
+    missing case is its own alternative (pouchdb-server and MongoDB agree either way)."""
+    none = {"$nor": [alt for v in values for alt in _equal(name, v)]}
+    if any(v is None for v in values):
+        return none
+    return {"$or": [{name: {"$exists": False}}, none]}
+
+
 def _field_clauses(name: str, ops: Dict[str, Any]) -> List[Dict[str, Any]]:
     clauses: List[Dict[str, Any]] = []
     for op, value in ops.items():
         if op == "$eq":
             clauses.append({"$or": _equal(name, value)})
         elif op == "$ne":
-            clauses.append({"$nor": _equal(name, value)})
+            clauses.append(_none_of(name, [value]))
         elif op == "$in":
             clauses.append({"$or": [alt for v in value for alt in _equal(name, v)]} if value
                            else {"$or": [{name: {"$in": []}}]})  # matches nothing, on both
         elif op == "$nin":
             if value:
-                clauses.append({"$nor": [alt for v in value for alt in _equal(name, v)]})
+                clauses.append(_none_of(name, value))
         elif op == "$exists":  # holds a value: neither missing nor null
             clauses.append({"$nor" if value else "$or": _equal(name, None)})
     bounds = {op: ops[op] for op in _RANGE_OPS if op in ops}
