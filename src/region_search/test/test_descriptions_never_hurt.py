@@ -1,7 +1,7 @@
 """Label descriptions never make region search worse: for each backend, with the shipped ranking
 settings, top-1 with descriptions >= without on every evaluation set (no ROS).
 
-Evaluation sets: the five buildings of bench/region_search/data/lobo_buildings.yaml (each one its
+Evaluation sets: the seven buildings of bench/region_search/data/lobo_buildings.yaml (each one its
 own set) and the real floor's held-out set region_test_real_2.yaml with the floor's descriptions
 (config/towne_levine_descriptions.yaml). The expected labels were written by hand before any
 model ran on them. The sentence backend is the real all-MiniLM-L6-v2; the word2vec backend is

@@ -9,13 +9,15 @@ from gensim.models import KeyedVectors
 
 from region_search.corpora import WordNet
 from region_search.embeddings import WordEmbeddings
-from region_search.errors import EmptyPhraseError, LabelFileError
+from region_search.errors import EmptyPhraseError, LabelFileError, ModelLoadingError
 from region_search.knowledge import PlaceKnowledge
 from region_search.ranking import (
     FEATURES,
     PlaceRecommender,
     RankingWeights,
+    SentenceFeatures,
     WordFeatures,
+    lead_and_gap,
     load_ranking_weights,
     specific_spelling,
 )
@@ -139,3 +141,74 @@ def test_the_shipped_settings_load_for_both_backends_and_bad_files_are_clear_err
         load_ranking_weights("word2vec", bad)
     with pytest.raises(WorkspaceError, match="cannot read"):
         load_ranking_weights("sentence", tmp_path / "missing.yaml")
+
+
+def test_a_place_named_by_the_label_file_and_the_regions_layer_is_one_entry(embed):
+    ranker = PlaceRecommender(WordFeatures(embed), RankingWeights(WEIGHTS.weights))
+    layer = [Region(n, 10.0 + i, 5.0, source="regions_layer")
+             for i, n in enumerate(["printer_room", "cafe", "elevator", "printer_room"])]
+    ranker.set_regions(regions() + layer)
+    result = ranker.recommend("print a poster", top_k=3)
+    names = [r.region.name for r in result.results]
+    assert names[0] == "printer_room" and len(set(names)) == len(names) == 3, names
+    printer = result.results[0].region
+    assert printer.source == "label_file+regions_layer"
+    assert (printer.x, printer.y) == (0.0, 0.0)  # the label file's pose (LABELS[0] at x 0)
+    everything = [r.region.name for r in ranker.recommend("coffee", top_k=0).results]
+    assert sorted(everything) == sorted(LABELS)
+    layer_only = PlaceRecommender(WordFeatures(embed), RankingWeights(WEIGHTS.weights))
+    layer_only.set_regions(layer)
+    only = layer_only.recommend("print a poster", top_k=3).results
+    assert [r.region.name for r in only][:1] == ["printer_room"] and len(only) == 3
+    assert only[0].region.source == "regions_layer" and only[0].region.x == 10.0
+
+
+class LoadingThenReady:
+    """An embedding backend that is still loading for its first `loading` calls (raising as the
+    embedding service's client does), then answers: the moment a node's backend becomes ready."""
+
+    def __init__(self, embed, loading: int):
+        self.embed, self.loading, self.calls = embed, loading, 0
+
+    def __call__(self, words):
+        self.calls += 1
+        if self.calls <= self.loading:
+            raise ModelLoadingError("embedding model still loading (test)")
+        return self.embed(words)
+
+
+@pytest.mark.parametrize("kind", ["word", "sentence"])
+@pytest.mark.parametrize("loading", [1, 2, 3, 5, 8])
+def test_labels_are_complete_after_the_backend_became_ready_in_the_middle_of_an_update(
+        embed, kind, loading):
+    backend = LoadingThenReady(embed, loading)
+    features = WordFeatures(backend) if kind == "word" else SentenceFeatures(backend)
+    ranker = PlaceRecommender(features, WEIGHTS)
+    failed, published = 0, []
+    for _ in range(loading + 1):
+        try:
+            ranker.set_regions(regions({"grasp": "the robotics laboratory"}))
+            break
+        except ModelLoadingError:
+            failed += 1
+            published.append(ranker.features.labels.names + [r.name for r in ranker.regions])
+    assert failed >= 1 and backend.calls > loading
+    for phrase in ("print a poster", "coffee", "room 313", "the robotics lab"):
+        result = ranker.recommend(phrase, top_k=0)
+        assert sorted(r.region.name for r in result.results) == sorted(LABELS), phrase
+    assert published == [[]] * failed  # a failed update published nothing
+
+
+def test_confidence_rises_with_the_lead_and_says_not_sure_below_its_level(embed):
+    calibrated = RankingWeights(WEIGHTS.weights, no_match_margin=float("-inf"),
+                                confidence=(-2.0, 4.0, 4.0), sure_confidence=0.5)
+    assert calibrated.confidence_of(0.0, 0.0) == pytest.approx(1 / (1 + np.exp(2.0)))
+    assert calibrated.confidence_of(1.0, 0.5) > calibrated.confidence_of(0.5, 0.1)
+    assert np.isnan(WEIGHTS.confidence_of(1.0, 1.0))  # not calibrated
+    assert lead_and_gap(np.array([3.0, 1.0, 2.0])) == (1.0, 1.0)
+    ranker = recommender(embed, weights=calibrated)
+    clear = ranker.recommend("printer", top_k=3)
+    vague = ranker.recommend("zebra giraffe", top_k=3)  # no word has a vector: all tie
+    assert clear.matched and clear.sure and clear.confidence > 0.5
+    assert vague.matched and not vague.sure and vague.confidence < clear.confidence
+    assert len(vague.results) == 3  # a best guess with its confidence, not an empty answer

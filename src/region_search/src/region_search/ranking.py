@@ -23,8 +23,16 @@ Descriptions (what a visitor's sign says) never replace a label's own evidence: 
 label is also scored as if the description were its name, less `description_offset`, and keeps
 the better of the two. So a description adds evidence for its own place only, and only when the
 phrase matches it better than the label's own name and knowledge do; it cannot lower any
-label's score. When the best score is below `no_match_margin`, no labelled place matches.
+label's score. When the best score's lead over the mean score is below `no_match_margin`, no
+labelled place matches. The answer's confidence (how likely the first place is the one meant) is
+a logistic function of that lead and of the gap to the second place (`RankingWeights.confidence`,
+fitted by the same bench); below `sure_confidence` the ranking is given as a best guess.
+
+Label sets are replaced atomically: `set_regions` computes everything for the new labels (the
+embedding backend may fail or still be loading half-way) and only then publishes it; a failed
+call leaves the previous labels in use, and the next call goes on where it stopped.
 """
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
@@ -43,6 +51,7 @@ from region_search.recommender import (
     Region,
     RegionRecommender,
     descriptions_of,
+    distinct_places,
 )
 from region_search.text_similarity import (
     STOPWORDS,
@@ -55,7 +64,7 @@ from region_search.text_similarity import (
 
 __all__ = ["FEATURES", "RankingWeights", "load_ranking_weights", "DEFAULT_WEIGHTS_PATH",
            "QueryEvidence", "SentenceFeatures", "WordFeatures", "PlaceRecommender",
-           "specific_spelling"]
+           "specific_spelling", "lead_and_gap"]
 
 FEATURES = ("name", "knowledge", "expanded", "compounds", "spelling", "number_match",
             "number_mismatch")
@@ -71,6 +80,18 @@ class RankingWeights:
     description_offset: float = 0.0
     no_match_margin: float = float("-inf")
     chosen_on: str = ""
+    # (bias, lead, gap) of the logistic confidence; () = not calibrated (confidence nan)
+    confidence: Tuple[float, ...] = ()
+    sure_confidence: float = 0.5
+
+    def confidence_of(self, lead: float, gap: float) -> float:
+        """How likely the best label is the place meant, from its lead over the mean score and
+        its gap to the second best (nan without a calibration)."""
+        if len(self.confidence) != 3:
+            return float("nan")
+        bias, a, b = self.confidence
+        z = bias + a * lead + b * gap
+        return 1.0 / (1.0 + math.exp(-z)) if z > -700 else 0.0
 
     def vector(self) -> np.ndarray:
         unknown = sorted(set(self.weights) - set(FEATURES))
@@ -82,6 +103,8 @@ class RankingWeights:
         return {"weights": {k: round(float(v), 4) for k, v in self.weights.items()},
                 "description_offset": round(float(self.description_offset), 4),
                 "no_match_margin": round(float(self.no_match_margin), 4),
+                "confidence": [round(float(v), 4) for v in self.confidence],
+                "sure_confidence": round(float(self.sure_confidence), 4),
                 "chosen_on": self.chosen_on}
 
 
@@ -97,7 +120,12 @@ def load_ranking_weights(backend: str, path="") -> RankingWeights:
         weights = RankingWeights({str(k): float(v) for k, v in entry["weights"].items()},
                                  float(entry.get("description_offset", 0.0)),
                                  float(entry.get("no_match_margin", float("-inf"))),
-                                 str(entry.get("chosen_on", "")))
+                                 str(entry.get("chosen_on", "")),
+                                 tuple(float(v) for v in entry.get("confidence", ()) or ()),
+                                 float(entry.get("sure_confidence", 0.5)))
+        if weights.confidence and len(weights.confidence) != 3:
+            raise ValueError(f"confidence needs 3 numbers (bias, lead, gap), got "
+                             f"{list(weights.confidence)}")
         weights.vector()
         return weights
     except OSError as err:
@@ -149,27 +177,38 @@ class QueryEvidence:
     notes: List[str] = field(default_factory=list)
 
 
+@dataclass(frozen=True)
+class _Labels:
+    """One label set: sorted names, {name: description}, how specific each name word is."""
+
+    names: Tuple[str, ...] = ()
+    described: Dict[str, str] = field(default_factory=dict)
+    specificity: Dict[str, float] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, regions: Sequence[Region]) -> "_Labels":
+        described = descriptions_of(regions)
+        names = tuple(sorted(described))
+        return cls(names, described, _specificity({n: tokenize(n) for n in names}))
+
+
 class _LabelSet:
-    """Label names, descriptions and what both backends derive from them."""
+    """The published label set and what both backends derive from label names."""
 
     def __init__(self, wordnet: Optional[WordNet], expansion: ExpansionWeights,
                  compound_cap: int):
         self.knowledge = PlaceKnowledge(wordnet) if wordnet is not None else None
         self.expander = LabelExpander(wordnet, expansion)
         self.compound_cap = compound_cap
-        self.described: Dict[str, str] = {}
-        self.names: List[str] = []
-        self.specificity: Dict[str, float] = {}
+        self.current = _Labels()
 
-    def update(self, regions: Sequence[Region]) -> List[str]:
-        """Take these regions' labels; returns the labels new or changed since the last call."""
-        described = descriptions_of(regions)
-        changed = [n for n in sorted(described) if self.described.get(n) != described[n]
-                   or n not in self.names]
-        self.described = described
-        self.names = sorted(described)
-        self.specificity = _specificity({n: tokenize(n) for n in self.names})
-        return changed
+    @property
+    def names(self) -> List[str]:
+        return list(self.current.names)
+
+    @property
+    def described(self) -> Dict[str, str]:
+        return self.current.described
 
     def knowledge_text(self, name: str) -> str:
         return self.knowledge.text(name) if self.knowledge else " ".join(tokenize(name))
@@ -184,13 +223,14 @@ class _LabelSet:
         extra = sorted((w for w in words if w not in tokens), key=lambda w: (-words[w][0], w))
         return " ".join(tokens) + (": " + " ".join(extra) if extra else "")
 
-    def lexical(self, phrase: str, name: str, description: str = "") -> Tuple[float, float,
-                                                                               float]:
-        """(spelling, number_match, number_mismatch) of a phrase against a label (its
-        description's words and numbers count as the name's when given)."""
+    @staticmethod
+    def lexical(labels: _Labels, phrase: str, name: str,
+                description: str = "") -> Tuple[float, float, float]:
+        """(spelling, number_match, number_mismatch) of a phrase against a label of `labels`
+        (its description's words and numbers count as the name's when given)."""
         words = content_words(phrase)
         name_words = tokenize(name) + (content_words(description) if description else [])
-        spelled = specific_spelling(words, name_words, self.specificity)
+        spelled = specific_spelling(words, name_words, labels.specificity)
         numbers, own = _numbers(phrase), _numbers(name) | _numbers(description)
         shared = bool(numbers & own)
         return spelled, float(shared), float(bool(numbers and own and not shared))
@@ -205,49 +245,63 @@ class SentenceFeatures:
         self.embed_phrases = embed_phrases
         self.compound_keep = compound_keep
         self.labels = _LabelSet(wordnet, expansion, compound_cap)
-        self._vectors: Dict[str, Dict[str, np.ndarray]] = {}
+        # (name, description) -> its texts' vectors; the published (labels, vectors)
+        self._cache: Dict[Tuple[str, str], Dict[str, np.ndarray]] = {}
+        self._state: Tuple[_Labels, Dict[str, Dict[str, np.ndarray]]] = (_Labels(), {})
 
     def set_regions(self, regions: Sequence[Region]) -> None:
-        for name in self.labels.update(regions):
-            description = self.labels.described[name]
-            texts = {"name": [" ".join(tokenize(name))],
-                     "knowledge": [self.labels.knowledge_text(name)],
-                     "expanded": [self.labels.expanded_text(name)],
-                     "compounds": self.labels.compound_texts(name)}
-            if description:
-                texts["described"] = [f"{' '.join(tokenize(name))}, {description}"]
-            flat = [t for group in texts.values() for t in group]
-            vectors = np.asarray(self.embed_phrases(flat).vectors, dtype=np.float64)
-            if len(vectors) != len(flat):
-                raise EmbeddingError(f"{len(flat)} label texts gave {len(vectors)} vectors")
-            start, own = 0, {}
-            for key, group in texts.items():
-                own[key] = vectors[start:start + len(group)]
-                start += len(group)
-            own["compounds"] = _closest(own["compounds"], own["knowledge"][0],
-                                        self.compound_keep)
-            self._vectors[name] = own
+        """Encode the new or changed labels' texts, then publish the whole label set at once."""
+        labels = _Labels.of(regions)
+        vectors = {}
+        for name in labels.names:
+            key = (name, labels.described[name])
+            if key not in self._cache:  # an embedding failure here publishes nothing
+                self._cache[key] = self._encode(name, key[1])
+            vectors[name] = self._cache[key]
+        self._cache = {(n, labels.described[n]): vectors[n] for n in labels.names}
+        self._state = (labels, vectors)
+        self.labels.current = labels
+
+    def _encode(self, name: str, description: str) -> Dict[str, np.ndarray]:
+        """The vectors of one label's texts (name, knowledge, expanded, compounds, described)."""
+        texts = {"name": [" ".join(tokenize(name))],
+                 "knowledge": [self.labels.knowledge_text(name)],
+                 "expanded": [self.labels.expanded_text(name)],
+                 "compounds": self.labels.compound_texts(name)}
+        if description:
+            texts["described"] = [f"{' '.join(tokenize(name))}, {description}"]
+        flat = [t for group in texts.values() for t in group]
+        vectors = np.asarray(self.embed_phrases(flat).vectors, dtype=np.float64)
+        if len(vectors) != len(flat):
+            raise EmbeddingError(f"{len(flat)} label texts gave {len(vectors)} vectors")
+        start, own = 0, {}
+        for key, group in texts.items():
+            own[key] = vectors[start:start + len(group)]
+            start += len(group)
+        own["compounds"] = _closest(own["compounds"], own["knowledge"][0], self.compound_keep)
+        return own
 
     def evidence(self, phrase: str) -> QueryEvidence:
+        labels, vectors = self._state  # one published label set for the whole phrase
         query = self.embed_phrases([phrase])
         vector = np.asarray(query.vectors[0], dtype=np.float64)
         rows, described_rows, any_described = [], [], False
-        for name in self.labels.names:
-            own = self._vectors[name]
+        for name in labels.names:
+            own = vectors[name]
             compounds = float(np.max(own["compounds"] @ vector)) if len(own["compounds"]) else 0.0
             row = [float(own["name"][0] @ vector), float(own["knowledge"][0] @ vector),
                    float(own["expanded"][0] @ vector), compounds,
-                   *self.labels.lexical(phrase, name)]
+                   *_LabelSet.lexical(labels, phrase, name)]
             rows.append(row)
-            description = self.labels.described[name]
+            description = labels.described[name]
             if description:
                 any_described = True
                 described_rows.append([float(own["described"][0] @ vector), *row[1:4],
-                                       *self.labels.lexical(phrase, name, description)])
+                                       *_LabelSet.lexical(labels, phrase, name, description)])
             else:
                 described_rows.append(row)
         notes = [n for n in "; ".join(query.notes).split("; ") if n]
-        return QueryEvidence(list(self.labels.names), np.array(rows),
+        return QueryEvidence(list(labels.names), _matrix(rows),
                              np.array(described_rows) if any_described else None,
                              list(query.oov), notes)
 
@@ -269,25 +323,37 @@ class WordFeatures:
                           if wordnet is not None else self._names)
         self._described = RegionRecommender(embed_words, number_words=False)
         self._words: Dict[str, Tuple[Optional[np.ndarray], float]] = {}
-        self._means: Dict[str, Dict[str, np.ndarray]] = {}
+        self._cache: Dict[str, Dict[str, np.ndarray]] = {}  # name -> its knowledge texts' means
+        self._state: Tuple[_Labels, Dict[str, Dict[str, np.ndarray]]] = (_Labels(), {})
 
     def set_regions(self, regions: Sequence[Region]) -> None:
-        changed = self.labels.update(regions)
-        bare = [Region(name, 0.0, 0.0) for name in self.labels.names]
+        """Embed the new labels' words and texts, then publish the whole label set at once (the
+        word-by-word recommenders below finish an interrupted update on the next call)."""
+        labels = _Labels.of(regions)
+        bare = [Region(name, 0.0, 0.0) for name in labels.names]
         self._names.set_regions(bare)
         if self._expanded is not self._names:
             self._expanded.set_regions(bare)
-        self._described.set_regions([Region(n, 0.0, 0.0, description=self.labels.described[n])
-                                     for n in self.labels.names])
-        for name in changed:
-            texts = {"knowledge": [self.labels.knowledge_text(name)],
-                     "compounds": self.labels.compound_texts(name)}
-            self._learn_words([t for group in texts.values() for t in group])
-            means = {key: self._rows(group) for key, group in texts.items()}
-            if len(means["knowledge"]):
-                means["compounds"] = _closest(means["compounds"], means["knowledge"][0],
-                                              self.compound_keep)
-            self._means[name] = means
+        self._described.set_regions([Region(n, 0.0, 0.0, description=labels.described[n])
+                                     for n in labels.names])
+        means = {}
+        for name in labels.names:
+            if name not in self._cache:  # an embedding failure here publishes nothing
+                self._cache[name] = self._label_means(name)
+            means[name] = self._cache[name]
+        self._cache = dict(means)
+        self._state = (labels, means)
+        self.labels.current = labels
+
+    def _label_means(self, name: str) -> Dict[str, np.ndarray]:
+        texts = {"knowledge": [self.labels.knowledge_text(name)],
+                 "compounds": self.labels.compound_texts(name)}
+        self._learn_words([t for group in texts.values() for t in group])
+        means = {key: self._rows(group) for key, group in texts.items()}
+        if len(means["knowledge"]):
+            means["compounds"] = _closest(means["compounds"], means["knowledge"][0],
+                                          self.compound_keep)
+        return means
 
     def _learn_words(self, texts: Sequence[str]) -> None:
         missing = sorted({w for t in texts for w in content_words(t)} - set(self._words))
@@ -313,6 +379,7 @@ class WordFeatures:
         return np.array(means) if means else np.zeros((0, 0))
 
     def evidence(self, phrase: str) -> QueryEvidence:
+        labels, label_means = self._state  # one published label set for the whole phrase
         names = self._scores(self._names, phrase)
         expanded = self._scores(self._expanded, phrase)
         described = self._scores(self._described, phrase)
@@ -320,27 +387,42 @@ class WordFeatures:
         query = self._mean(phrase)
         query = query if query is not None else np.zeros(0)
         rows, described_rows, any_described = [], [], False
-        for name in self.labels.names:
-            means = self._means[name]
+        for name in labels.names:
+            means = label_means[name]
             row = [names[name], _cosine(means["knowledge"], query),
                    expanded[name], _cosine(means["compounds"], query),
-                   *self.labels.lexical(phrase, name)]
+                   *_LabelSet.lexical(labels, phrase, name)]
             rows.append(row)
-            description = self.labels.described[name]
+            description = labels.described[name]
             if description:
                 any_described = True
                 described_rows.append([described[name], *row[1:4],
-                                       *self.labels.lexical(phrase, name, description)])
+                                       *_LabelSet.lexical(labels, phrase, name, description)])
             else:
                 described_rows.append(row)
         embedded = self.embed_words(phrase_tokens(phrase))
-        return QueryEvidence(list(self.labels.names), np.array(rows),
+        return QueryEvidence(list(labels.names), _matrix(rows),
                              np.array(described_rows) if any_described else None,
                              list(embedded.oov), [n for n in embedded.notes if n])
 
     @staticmethod
     def _scores(recommender: RegionRecommender, phrase: str) -> Dict[str, float]:
         return {r.region.name: r.score for r in recommender.recommend(phrase, top_k=0).results}
+
+
+def _matrix(rows: list) -> np.ndarray:
+    """Evidence rows as a (labels, features) matrix, also when there are no labels."""
+    return np.array(rows, dtype=np.float64).reshape(len(rows), len(FEATURES))
+
+
+def lead_and_gap(scores: np.ndarray) -> Tuple[float, float]:
+    """The best score's lead over the mean score, and its gap to the second best (0 with
+    one label; -inf, 0 with none): what the no-match answer and the confidence look at."""
+    if len(scores) == 0:
+        return float("-inf"), 0.0
+    ordered = np.sort(np.asarray(scores, dtype=np.float64))[::-1]
+    gap = float(ordered[0] - ordered[1]) if len(ordered) > 1 else 0.0
+    return float(ordered[0] - np.mean(ordered)), gap
 
 
 def _closest(rows: np.ndarray, anchor: np.ndarray, keep: int) -> np.ndarray:
@@ -370,12 +452,15 @@ class PlaceRecommender:
         self.features = features
         self.weights = weights
         self.number_words = number_words
-        self.regions: List[Region] = []
+        self.regions: List[Region] = []  # one per place name
 
     def set_regions(self, regions: Sequence[Region]) -> None:
-        """Use these regions from now on (label texts are encoded once)."""
-        self.features.set_regions(regions)
-        self.regions = list(regions)
+        """Use these regions from now on, one per place name (recommender.distinct_places:
+        a label file's place and a regions layer's of the same name are one place); label
+        texts are encoded once. Nothing changes when it fails (e.g. the model still loads)."""
+        places = distinct_places(regions)
+        self.features.set_regions(places)
+        self.regions = places
 
     def evidence(self, phrase: str) -> QueryEvidence:
         phrase_tokens(phrase)  # EmptyPhraseError for a phrase without words
@@ -393,18 +478,24 @@ class PlaceRecommender:
         """The `top_k` best regions (all when top_k <= 0), best first, or none with
         `matched` False when the best score's lead over the mean score is below the no-match
         margin."""
+        places = {r.name: r for r in self.regions}
         evidence = self.evidence(phrase)
         scores = self.scores(evidence)
         by_name = dict(zip(evidence.names, scores))
-        ranked = sorted(self.regions, key=lambda r: (-by_name[r.name], r.name, r.x, r.y))
+        ranked = sorted((places[n] for n in evidence.names), key=lambda r: (-by_name[r.name],
+                                                                           r.name))
         best = float(by_name[ranked[0].name]) if ranked else float("-inf")
-        matched = bool(ranked) and best - float(np.mean(scores)) >= self.weights.no_match_margin
+        lead, gap = lead_and_gap(scores)
+        matched = bool(ranked) and lead >= self.weights.no_match_margin
+        confidence = self.weights.confidence_of(lead, gap) if ranked else 0.0
         shown = ranked if top_k <= 0 else ranked[:top_k]
         results = [RankedRegion(r, float(by_name[r.name]), self._explain(evidence, r.name))
                    for r in shown]
         return Recommendation(phrase, results if matched else [], evidence.oov, evidence.notes,
                               matched=matched, best_score=best,
-                              closest=results[:1] if not matched else [])
+                              closest=results[:1] if not matched else [],
+                              confidence=confidence,
+                              sure=not confidence < self.weights.sure_confidence)
 
     def _explain(self, evidence: QueryEvidence, name: str) -> str:
         index = evidence.names.index(name)

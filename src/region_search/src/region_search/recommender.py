@@ -40,7 +40,7 @@ from region_search.text_similarity import (
 )
 
 __all__ = ["Region", "load_label_file", "parse_labels", "load_descriptions", "with_descriptions",
-           "descriptions_of",
+           "descriptions_of", "distinct_places",
            "ExpansionWeights", "LabelExpander", "RankedRegion", "Recommendation",
            "RegionRecommender"]
 
@@ -227,6 +227,24 @@ def descriptions_of(regions: Sequence[Region]) -> Dict[str, str]:
     return described
 
 
+def distinct_places(regions: Sequence[Region]) -> List[Region]:
+    """One region per place name, in first-seen order: a label file's entry gives the pose
+    (else the first region of that name), the first non-empty description is kept and the
+    sources are joined ("label_file+regions_layer" when both name the place)."""
+    from dataclasses import replace
+
+    groups: Dict[str, List[Region]] = {}
+    for region in regions:
+        groups.setdefault(region.name, []).append(region)
+    merged = []
+    for name, group in groups.items():
+        chosen = next((r for r in group if r.source == "label_file"), group[0])
+        sources = "+".join(dict.fromkeys(r.source for r in group))
+        description = next((r.description for r in group if r.description), "")
+        merged.append(replace(chosen, source=sources, description=description))
+    return merged
+
+
 def _add(words: Dict[str, Tuple[float, str]], token: str, weight: float, origin: str) -> None:
     if token not in words or words[token][0] < weight:
         words[token] = (weight, origin)
@@ -251,6 +269,10 @@ class Recommendation:
     matched: bool = True
     best_score: float = float("nan")
     closest: List[RankedRegion] = field(default_factory=list)
+    # How likely the first region is the place meant (0..1; nan: the ranking has no
+    # calibration); `sure` False: below the confident level, the ranking is a best guess.
+    confidence: float = float("nan")
+    sure: bool = True
 
 
 class RegionRecommender:

@@ -297,8 +297,12 @@ class RegionRecommenderNode:
                 self.check_embedding()
         if result.matched:
             best = result.results[0]
-            message = (f"best: {best.region.name} ({best.score:.2f}) of {len(regions)} regions "
+            places = len(self.recommender.regions)
+            message = (f"best: {best.region.name} ({best.score:.2f}) of {places} places "
                        f"({self.client.backend} backend)")
+            if not result.sure:
+                message = (f"not sure (confidence {result.confidence:.2f}, below "
+                           f"{self.recommender.weights.sure_confidence:.2f}): {message}")
         else:
             closest = result.closest[0]
             message = (f"no labelled place matches {request.phrase!r} (closest: "
@@ -317,7 +321,8 @@ class RegionRecommenderNode:
             frame_id=self.frame_id, sources=[r.region.source for r in result.results],
             explanations=[r.explanation for r in result.results], oov_words=result.oov_words,
             fallbacks=result.fallbacks, backend=self.client.backend,
-            backend_note=self.client.backend_note, matched=result.matched)
+            backend_note=self.client.backend_note, matched=result.matched,
+            confidence=result.confidence)
 
     def _recommender(self):
         """The recommender for the service's current backend and model (rebuilt on a change:
