@@ -123,6 +123,7 @@ def test_cli_round_trip_and_clear_errors(couchdb_url, tmp_path, workspace_root, 
 
 
 @pytest.mark.ros
+@pytest.mark.parametrize("couch_server", ["pouchdb"], indirect=True)  # the CLI's store path on both: above
 def test_bag_converter_launch(roslaunch, couchdb_url, tmp_path):
     source = tmp_path / "source.bag"
     write_bag(source)
@@ -185,6 +186,7 @@ def test_an_unindexed_bag_imports_what_rosbag_reindex_recovers(db_url, tmp_path)
 
 
 @pytest.mark.ros
+@pytest.mark.parametrize("couch_server", ["pouchdb"], indirect=True)  # bag recovery, not the server
 def test_a_bag_left_by_a_killed_rosbag_record_is_recovered(rospy_node, couchdb_url, mongodb_url, tmp_path,
                                                            capsys):
     """A real `rosbag record` of a real roscore, killed with SIGKILL while recording: its

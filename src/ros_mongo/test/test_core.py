@@ -210,6 +210,7 @@ def test_replay_window_rate_and_order(replay_store):
 
 
 @pytest.mark.db
+@pytest.mark.parametrize("couch_server", ["pouchdb"], indirect=True)  # reads as the test above does
 def test_replay_fixed_rate_loop_and_stop(replay_store):
     got, clock = [], []
     replayer = Replayer(replay_store, got.append, clock=clock.append, fixed_rate=400.0, loop=True)

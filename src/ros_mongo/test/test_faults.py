@@ -4,13 +4,15 @@ cluster timeouts and quorum, cut-off bodies, latency, a reverse proxy's path pre
 These answers come from ros_harness.fault_proxy: a REAL process on its own port in front of a real
 pouchdb-server, answering with the exact status and JSON bodies a real CouchDB 3.5 gave (as
 measured against one), switched on and off while the real
-recorder node (roscore + roslaunch) runs. Expected values come from what the test published, never
-from the code under test.
+recorder node (roscore + roslaunch) runs. The member-account and document-size tests run on the
+real Apache CouchDB too (`member`, `size_limit`: its own refusals, no proxy). Expected values come
+from what the test published, never from the code under test.
 """
 import json
 import subprocess
 import threading
 import uuid
+from typing import Callable, NamedTuple, Optional
 
 import pytest
 import requests
@@ -55,18 +57,41 @@ def _admin_creates(couchdb_server, name):
     assert requests.put(f"{couchdb_server.url}/{name}", timeout=30).status_code in (201, 202)
 
 
+class Member(NamedTuple):
+    """A database an admin created, as its member sees it (`url`) and as the admin does (`admin`);
+    `new(name)`: the member's URL of a database nobody created; `proxy` (pouchdb-server only)."""
+
+    url: str
+    admin: str
+    new: Callable[[str], str]
+    proxy: Optional[FaultProxy]
+
+
+@pytest.fixture(params=["pouchdb", "apache"])
+def member(request, tmp_path):
+    """A member account: pouchdb-server behind the proxy answering as CouchDB 3 does for members,
+    then the real thing (a real Apache CouchDB node, its admin and member accounts)."""
+    name = _names()
+    if request.param == "apache":
+        server = request.getfixturevalue("apache_couchdb")
+        yield Member(server.database_url(name), server.admin_database_url(name), server.member_url, None)
+        return
+    server = request.getfixturevalue("couchdb_server")
+    _admin_creates(server, name)
+    with FaultProxy(server.url, tmp_path) as proxy:
+        proxy.set(member=True)
+        yield Member(proxy.database_url(name), f"{server.url}/{name}", proxy.database_url, proxy)
+
+
 def _records(count, t0=1000.0, topic="/chatter", step=0.01):
     return [make_record(topic, String, serialized(String(data=f"m{i}")), receive=split_time(t0 + step * i),
                         session_id="s1") for i in range(count)]
 
 
 # -- the store on its own (no ROS) -------------------------------------------------------------------
-def test_member_account_records_and_reads_without_any_design_document(couchdb_server, proxy, tmp_path):
-    name = _names()
-    _admin_creates(couchdb_server, name)
-    proxy.set(member=True)
+def test_member_account_records_and_reads_without_any_design_document(member, tmp_path):
     records = _records(700)
-    with open_store(proxy.database_url(name)) as store:
+    with open_store(member.url) as store:
         assert store.indexed is False                 # the _index POST was refused as for a member
         store.put_topic(TopicInfo.of_class("/chatter", String))
         assert store.insert_records(records) == 700
@@ -79,16 +104,15 @@ def test_member_account_records_and_reads_without_any_design_document(couchdb_se
         assert store.count_messages(topic="/chatter") == 700
         result = export_bag(store, parse_query("topic /chatter"), tmp_path / "out.bag", progress=False)
         assert result.messages == 700
-    assert proxy.answered("member") >= 1
-    design = requests.get(f"{couchdb_server.url}/{name}/_all_docs",
+    assert member.proxy is None or member.proxy.answered("member") >= 1
+    design = requests.get(f"{member.admin}/_all_docs",
                           params={"startkey": '"_design/"', "endkey": '"_design0"'}, timeout=30).json()
     assert design["rows"] == []                       # nothing an admin would have to write
 
 
-def test_member_cannot_create_the_database_and_is_told_so(proxy):
-    proxy.set(member=True)
-    with pytest.raises(Exception) as err:
-        open_store(proxy.database_url(_names()))
+def test_member_cannot_create_the_database_and_is_told_so(member):
+    with pytest.raises(StoreRefused) as err:
+        open_store(member.new(_names()))
     assert "may not create it" in str(err.value) and "You are not a server admin." in str(err.value)
 
 
@@ -221,33 +245,64 @@ def test_spool_survives_an_auth_error_during_the_drain(couchdb_server, proxy, ro
     sender.close()
 
 
-@pytest.mark.ros
-def test_oversized_document_is_split_out_and_only_it_is_quarantined(couchdb_server, proxy, roslaunch,
-                                                                    tmp_path, diagnostics):
+class SizeLimit(NamedTuple):
+    """A database whose server refuses documents over 20,000 bytes, as the member (`url`) and the
+    admin (`admin`) see it; `lift()` is the operator raising the limit; `refused()` counts the
+    proxy's refusals (None on the real server, which refuses by itself)."""
+
+    url: str
+    admin: str
+    lift: Callable[[], object]
+    refused: Callable[[], Optional[int]]
+
+
+@pytest.fixture(params=["pouchdb", "apache"])
+def size_limit(request, tmp_path):
+    """pouchdb-server behind the proxy answering 413 document_too_large as CouchDB 3 does, then a
+    real Apache CouchDB node with its max_document_size set to 20,000 (restored afterwards)."""
     name = _names()
-    proxy.set(max_document_size=20000)
+    if request.param == "apache":
+        server = request.getfixturevalue("apache_couchdb")
+        old = server.set_config("couchdb", "max_document_size", "20000")
+        try:
+            yield SizeLimit(server.database_url(name), server.admin_database_url(name),
+                            lambda: server.set_config("couchdb", "max_document_size", old), lambda: None)
+        finally:
+            server.set_config("couchdb", "max_document_size", old)
+        return
+    server = request.getfixturevalue("couchdb_server")
+    with FaultProxy(server.url, tmp_path) as proxy:
+        proxy.set(max_document_size=20000)
+        yield SizeLimit(proxy.database_url(name), f"{server.url}/{name}", proxy.clear,
+                        lambda: proxy.answered("max_document_size"))
+
+
+@pytest.mark.ros
+def test_oversized_document_is_split_out_and_only_it_is_quarantined(size_limit, roslaunch, tmp_path,
+                                                                    diagnostics):
     quarantine = tmp_path / "refused.quarantine"
-    recorder(roslaunch, proxy.database_url(name), tmp_path, topics=["/odom", "/notes"],
+    recorder(roslaunch, size_limit.url, tmp_path, topics=["/odom", "/notes"],
              batch_period=3.0, quarantine_path=str(quarantine))
     notes = rospy.Publisher("/notes", String, queue_size=100)
     wait_until(lambda: notes.get_num_connections() > 0, 60, what="/notes subscribed")
     sender = Sender(rate=500.0).connected()
-    big = String(data="x" * 60000)                    # fits pouchdb-server, not this "CouchDB"
+    big = String(data="x" * 60000)                    # over the limit of 20,000 bytes
     sender.send(40)
     notes.publish(String(data="small"))
     notes.publish(big)
     sender.send(40)
     wait_until(lambda: diagnostics.count("stored") == 81 and diagnostics.count("quarantined") == 1, 60,
                what="81 stored and 1 quarantined")
-    assert proxy.answered("max_document_size") >= 2  # the whole batch, then the document alone
-    direct = f"{couchdb_server.url}/{name}"
+    refused = size_limit.refused()
+    assert refused is None or refused >= 2            # the whole batch, then the document alone
+    direct = size_limit.admin
     assert stored_xs(direct) == [float(i) for i in range(80)]
     with open_store(direct) as store:
         assert [m.message().data for m in store.find_messages(topic="/notes")] == ["small"]
     refused = [e for e in read_entries(quarantine) if isinstance(e, MessageRecord)]
     assert len(refused) == 1 and refused[0].raw == serialized(big)
     assert diagnostics.count("dropped") == 0 and diagnostics.level == DiagnosticStatus.WARN
-    proxy.clear()                                     # the operator raises max_document_size
+    size_limit.lift()                                 # the operator raises max_document_size
     with open_store(direct) as store:
         assert import_quarantine(quarantine, store) == (1, 0)
         assert [m.message().data for m in store.find_messages(topic="/notes")][-1] == big.data

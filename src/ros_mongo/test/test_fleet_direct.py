@@ -7,6 +7,8 @@ indexes 500 error_saving_ddoc forbidden; `require_auth`: only the robots' creden
 roscores (one per robot), the recorders through roslaunch, and the fleet test publisher. The central
 outage is the real central server stopped; one robot is restarted in the middle of it. What was
 published is counted by the publishers; what central holds is read from central by content.
+The same fleet also records into a real 3-node Apache CouchDB cluster (ros_harness
+`couchdb_cluster`), one node of it killed and restarted.
 """
 from pathlib import Path
 
@@ -130,6 +132,58 @@ def test_direct_fleet_keeps_each_message_once_through_a_central_outage_and_a_rob
             robot.close()
         proxy.stop()
         central.stop()
+
+
+@pytest.mark.ros
+@pytest.mark.db
+@pytest.mark.slow
+def test_direct_fleet_on_a_real_couchdb_cluster_keeps_every_message_through_a_node_killed_and_restarted(
+        couchdb_cluster, tmp_path, workspace_root):
+    """Two robots record through node 1 of a real 3-node Apache CouchDB cluster (n = 3) as a
+    database member; node 2 is killed (SIGKILL) while they publish, and started again: writes keep
+    their quorum (2 of 3 copies), and every message is there once, read through each node."""
+    count, rate, hold = 300, 60.0, 100
+    cluster = couchdb_cluster
+    cluster.create_database("fleet")
+    user, password = cluster.member
+    credentials = tmp_path / "central.credentials"
+    credentials.write_text(f"{user}:{password}\n")
+    robots = []
+    try:
+        central_url = cluster.plain_url(0) + "/fleet"   # password-free: the credentials file has it
+        robots = [DirectRobot(i, tmp_path, central_url, credentials, workspace_root) for i in (1, 2)]
+        for robot in robots:
+            robot.launch.wait_for_subscribers(["/odom", "/camera/rgb/image_raw"], timeout=LONG)
+            robot.publish(count, rate, hold_at=hold)
+        node1 = cluster.admin_database_url("fleet", node=0)
+        wait_until(lambda: all(central_counts(node1).get(r.robot_id, 0) >= 40 for r in robots), LONG,
+                   what="40 messages of each robot central")
+        cluster.kill_node(1)
+        for robot in robots:
+            robot.go_file.touch()  # the rest of the stream comes while node 2 is down
+        wait_until(lambda: not any(r.publisher.alive for r in robots), LONG, what="all published")
+        published = {r.robot_id: r.published() for r in robots}
+        expected = sum(sum(p.values()) for p in published.values())
+        wait_until(lambda: sum(central_counts(node1).values()) >= expected, LONG,
+                   what=f"{expected} messages central with node 2 down")
+        cluster.start()  # starts the killed node only
+
+        want = {(r.robot_id, topic, i) for r in robots
+                for topic, step in (("/odom", 1), ("/camera/rgb/image_raw", 10))
+                for i in range(0, count, step)}
+        assert expected == len(want)
+        for node in range(3):
+            url = cluster.admin_database_url("fleet", node=node)
+            wait_until(lambda url=url: sum(central_counts(url).values()) >= expected, LONG,
+                       what=f"{expected} messages through node {node + 1}")
+            docs = all_docs(url)
+            assert [d["_id"] for d in docs if d.get("_conflicts")] == []
+            contents = [content(d) for d in messages(docs)]
+            assert len(contents) == len(set(contents)) and set(contents) == want  # once, none lost
+        assert not any(d["_id"].startswith("_design/") for d in docs)  # a member wrote no index
+    finally:
+        for robot in robots:
+            robot.close()
 
 
 @pytest.mark.ros

@@ -220,6 +220,7 @@ def test_the_bag_converter_without_bag_exports_with_the_originals_defaults(works
     assert written == [("/scan", [1.5, 2.5], T0)]
 
 
+@pytest.mark.parametrize("couch_server", ["pouchdb"], indirect=True)  # its source is unreachable
 def test_migrate_from_an_unreachable_server_fails_with_one_line(workspace_root, couchdb_url):
     done = _bag_tool(workspace_root, "migrate", "--from-url", f"mongodb://127.0.0.1:{free_port()}",
                      "--db-url", couchdb_url)

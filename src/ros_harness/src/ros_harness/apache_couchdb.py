@@ -138,7 +138,7 @@ class _CouchCopy:
     def _with(self, account: Tuple[str, str], node: int) -> str:
         return f"http://{quote(account[0])}:{quote(account[1])}@127.0.0.1:{self.ports[node]}"
 
-    def admin_request(self, method: str, path: str, body: Optional[dict] = None, *, node: int = 0,
+    def admin_request(self, method: str, path: str, body: object = None, *, node: int = 0,
                       ok: Sequence[int] = (200, 201, 202)) -> Tuple[int, dict]:
         """One request as the admin; (status, JSON body); HarnessError outside `ok`."""
         data = None if body is None else json.dumps(body).encode()
@@ -150,7 +150,7 @@ class _CouchCopy:
                 status, text = response.status, response.read()
         except urllib.error.HTTPError as err:
             status, text = err.code, err.read()
-        answer = json.loads(text.decode() or "{}")
+        answer = json.loads(text.decode() or "{}")  # a JSON value (an object for most requests)
         if status not in ok:
             raise HarnessError(f"CouchDB {method} {path} answered {status}: {answer}")
         return status, answer
@@ -161,6 +161,12 @@ class _CouchCopy:
         self.admin_request("PUT", f"/_users/org.couchdb.user:{user}",
                            {"name": user, "password": password, "roles": [], "type": "user"},
                            ok=(201, 202, 409))
+
+    def set_config(self, section: str, key: str, value: str, node: int = 0) -> str:
+        """Change one server setting at run time (as the admin, on one node); returns the old value."""
+        _, old = self.admin_request("PUT", f"/_node/_local/_config/{quote(section)}/{quote(key)}",
+                                    value, node=node)  # type: ignore[arg-type]
+        return str(old)
 
     def create_database(self, name: str) -> None:
         """The admin's step: the database, with the member account as its only member."""

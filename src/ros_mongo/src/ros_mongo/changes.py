@@ -9,6 +9,16 @@ change comes, which would also keep a follower from stopping. Each selected chan
 `FeedItem`: the decoded `StoredMessage` (through ros_mongo.documents, as the CouchDB backend
 reads it) and `seq`, the feed position just after it; save the `seq` of the last item the
 learner has folded in, and a new follower started `since` it yields only later changes.
+Order: the server's feed order, kept as it is (so that every `seq` resumes exactly): write order
+on pouchdb-server; Apache CouchDB interleaves the feeds of a database's shards (q = 2 by default,
+also on one node), so there each change comes once, but two messages may come in another order
+than they were written. A learner that needs time order sorts by `receive_time`, or the admin
+creates the database with one shard (`PUT /db?q=1`).
+A chunk (ros_mongo.chunks: many messages of a topic in one document) yields its messages one by
+one, with their own ids; the position after a message inside a chunk is
+`{"since": <the feed position before the chunk>, "chunk": <its id>, "done": <messages yielded>}`
+(JSON-able like a sequence), so a follower started from it yields the rest of that chunk, then
+later changes.
 
 The selector is a Mango-style dict evaluated here on each document (`selects`): top-level fields,
 each either a value (equality) or `{"$eq" | "$ne" | "$in" | "$nin" | "$exists": ...}`. It is not
@@ -28,6 +38,7 @@ from typing import Any, Dict, Iterator, List, NamedTuple, Optional
 import pybase64
 
 from ros_mongo.backends.couch import CouchStore
+from ros_mongo.chunks import expand
 from ros_mongo.documents import stored_message
 from ros_mongo.errors import StoreError
 from ros_mongo.records import StoredMessage
@@ -105,9 +116,10 @@ class ChangesFollower:
             return False
         return matches_selector(doc, self.selector)
 
-    def _decode(self, doc: Dict[str, Any]) -> Optional[StoredMessage]:
+    def _decode(self, doc: Dict[str, Any], raw: Optional[bytes] = None) -> Optional[StoredMessage]:
         try:
-            raw = pybase64.b64decode(doc["raw"]) if doc.get("raw") is not None else None
+            if raw is None and doc.get("raw") is not None:
+                raw = pybase64.b64decode(doc["raw"])
             return stored_message(doc, raw, self.store._load_blob, self.store.message_class)
         except (StoreError, ValueError, TypeError) as err:
             self.skipped += 1
@@ -117,19 +129,47 @@ class ChangesFollower:
     def poll(self) -> List[FeedItem]:
         """One request: the selected changes among the next `page` changes after `since`.
         Advances `since`; `caught_up` tells whether the feed's end was reached."""
-        params = {"since": str(self.since), "include_docs": "true", "limit": str(self.page)}
+        inside = self.since if isinstance(self.since, dict) and "chunk" in self.since else None
+        since = inside["since"] if inside else self.since
+        params = {"since": str(since), "include_docs": "true", "limit": str(self.page)}
         answer = self.database.json("GET", "/_changes", params=params)
         self.caught_up = len(answer.get("results", [])) < self.page
         items: List[FeedItem] = []
+        before = since
         for change in answer.get("results", []):
-            seq = change.get("seq", self.since)
+            seq = change.get("seq", before)
             doc = change.get("doc") or {}
-            if not change.get("deleted") and self.selects(doc):
+            if not change.get("deleted") and doc.get("kind") == "chunk":
+                done = inside["done"] if inside and inside["chunk"] == doc.get("_id") else 0
+                items += self._chunk_items(doc, before, seq, done)
+            elif not change.get("deleted") and self.selects(doc):
                 message = self._decode(doc)
                 if message is not None:
                     items.append(FeedItem(seq, message))
-            self.since = seq
+            before = self.since = seq
         self.since = answer.get("last_seq", self.since)
+        return items
+
+    def _chunk_items(self, doc: Dict[str, Any], before: Any, seq: Any, done: int) -> List[FeedItem]:
+        """The selected messages of a chunk (after the first `done`), each with its position."""
+        try:
+            messages = [m for m, _ in expand(doc, None)]
+            count = len(messages)
+            wanted = [i for i in range(done, count) if self.selects(messages[i])]
+            raw = self.store._load_blob(doc["_id"]) if wanted else b""
+            parts = expand(doc, raw, self.store.chunk_fields(doc)) if wanted else []
+        except (StoreError, ValueError, TypeError, KeyError) as err:
+            self.skipped += 1
+            logger.warning("changes of %s: skipped chunk %r: %s", self.shown, doc.get("_id"), err)
+            return []
+        items = []
+        for index in wanted:
+            message, data = parts[index]
+            stored = self._decode(message, data)
+            if stored is not None:
+                position = seq if index == count - 1 else {"since": before, "chunk": doc["_id"],
+                                                            "done": index + 1}
+                items.append(FeedItem(position, stored))
         return items
 
     def follow(self, stop: threading.Event) -> Iterator[FeedItem]:
