@@ -1,6 +1,7 @@
 """Fleet replication as users run it: robots record locally and push to a central CouchDB database.
 
-Real processes only: one pouchdb-server per robot plus a central one (ros_harness), real roscores
+Real processes only: one pouchdb-server per robot plus a central one (ros_harness; once a real
+Apache CouchDB central written as its member), real roscores
 (one per robot, as on real robots) and the nodes through roslaunch (launch/fleet.launch). Counts
 and ids are read from the stores, never built here.
 """
@@ -194,6 +195,35 @@ def test_central_restart_resumes_replication_from_its_checkpoint(tmp_path):
                 replication.stop()
         finally:
             central.stop()
+
+
+@pytest.mark.db
+def test_a_robot_pushes_to_a_real_couchdb_central_as_its_member(apache_couchdb, tmp_path):
+    """pouchdb-server on the robot, a real Apache CouchDB central: the robot's replicator writes as
+    a database member (created by the admin; no design document goes up); every message arrives
+    with its revision and the image attachment intact."""
+    robot_id, count = "robot_m", 300
+    central_url = apache_couchdb.database_url("fleet_" + uuid.uuid4().hex[:8])
+    admin_url = central_url.replace(":".join(apache_couchdb.member), ":".join(apache_couchdb.admin))
+    with PouchDBServer(tmp_path / "robot") as robot:
+        local_url = robot.database_url("robot_data")
+        with open_store(local_url) as store:
+            record_odometry(store, robot_id, 0, count)
+            pixels = bytes(i % 251 for i in range(640 * 480))
+            store.insert_message("/camera/rgb/image_raw", Image(height=480, width=640, encoding="mono8",
+                                                                 step=640, data=pixels), robot_id=robot_id)
+        replication = PushReplication.for_robot(CouchDatabase(local_url), CouchDatabase(central_url),
+                                                robot_id)
+        replication.start()
+        wait_until(lambda: count_messages(admin_url) == count + 1, LONG, what=f"{count + 1} messages central")
+        wait_until(lambda: same_documents(local_url, admin_url), LONG, what="the same revisions central")
+        docs = all_docs(admin_url)
+        image = next(d for d in messages(docs) if d["topic"] == "/camera/rgb/image_raw")
+        raw = requests.get(f"{admin_url}/{image['_id']}/raw", timeout=30)
+        assert raw.status_code == 200 and raw.content.endswith(pixels)
+        assert sorted(content(d)[2] for d in messages(docs) if d["topic"] == "/odom") == list(range(count))
+        assert not any(d["_id"].startswith("_design/") for d in docs)
+        replication.stop()
 
 
 @pytest.mark.db
