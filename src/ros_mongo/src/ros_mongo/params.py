@@ -13,6 +13,7 @@ from robot_common.errors import ConfigError
 from robot_common.params import NodeConfig, param
 from ros_mongo.bounded_spool import DROPPABLE_TYPES, DropPolicy
 from ros_mongo.changes import ChangesFollower
+from ros_mongo.chunks import ChunkPolicy
 from ros_mongo.decoding import DECODE_LEVELS, DecodePolicy
 from ros_mongo.errors import QueryError
 from ros_mongo.query import Query, parse_query, query_from_mapping
@@ -88,6 +89,13 @@ class RecorderParams(NodeConfig):
                                 choices=DECODE_LEVELS)
     blob_threshold: int = param(262144, "serialized messages larger than this (bytes) go to "
                                         "attachments / GridFS")
+    chunk_topics: List[str] = param([], "regular expressions matching whole topic names: these topics "
+                                        "are stored as chunks, one CouchDB document per topic per second "
+                                        "or per chunk_messages (far less server CPU for small messages; "
+                                        "see the README for the queries they answer)")
+    chunk_rate: float = param(0.0, "also chunk every topic once it receives this many messages within "
+                                   "one second (0.0: by chunk_topics only)")
+    chunk_messages: int = param(1000, "messages per chunk, at most")
     db_timeout: float = param(5.0, "seconds a database request may take")
     diagnostics_period: float = param(1.0, "seconds between /diagnostics messages")
     log_period: float = param(10.0, "seconds between count lines in the log (when they changed)")
@@ -98,6 +106,7 @@ class RecorderParams(NodeConfig):
         compile_patterns("exclude", self.exclude)
         compile_patterns("spool_drop_topics", self.spool_drop_topics)
         self.decode_policy()
+        self.chunk_policy()
         if self.spool_max_mb <= 0 or self.spool_min_free_mb < 0:
             raise ConfigError(f"~spool_max_mb must be positive and ~spool_min_free_mb not negative, got "
                               f"{self.spool_max_mb!r} and {self.spool_min_free_mb!r}")
@@ -112,6 +121,14 @@ class RecorderParams(NodeConfig):
             return DecodePolicy(self.decode, self.decode_default)
         except ValueError as err:
             raise ConfigError(f"~decode: {err}") from None
+
+    def chunk_policy(self) -> ChunkPolicy:
+        """Which topics are stored as chunks (ConfigError naming a bad setting)."""
+        compile_patterns("chunk_topics", self.chunk_topics)
+        try:
+            return ChunkPolicy(self.chunk_topics, self.chunk_rate, self.chunk_messages)
+        except ValueError as err:
+            raise ConfigError(f"~chunk_rate / ~chunk_messages: {err}") from None
 
     def drop_policy(self) -> DropPolicy:
         """Which topics lose their oldest messages first when the spool is full."""

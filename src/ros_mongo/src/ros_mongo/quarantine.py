@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple, Union
 
+from ros_mongo.chunks import ChunkRecord
 from ros_mongo.errors import DocumentsRejected, StoreError
 from ros_mongo.records import MessageRecord, TopicInfo
 from ros_mongo.spool import Spool, read_entries
@@ -56,7 +57,7 @@ def import_quarantine(path: Union[str, Path], store: MessageStore) -> Tuple[int,
     for entry in entries:
         if isinstance(entry, TopicInfo):
             store.put_topic(entry)
-    records = [e for e in entries if isinstance(e, MessageRecord)]
+    records = [e for e in entries if isinstance(e, (MessageRecord, ChunkRecord))]
     try:
         store.insert_records(records)
     except DocumentsRejected as err:
@@ -74,7 +75,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     try:
         if args.command == "list":
             for entry in read_entries(args.file):
-                if isinstance(entry, MessageRecord):
+                if isinstance(entry, (MessageRecord, ChunkRecord)):
                     print(f"{entry.id}  {entry.topic}  {entry.msg_type}  {len(entry.raw)} bytes")
             return 0
         if not args.db_url:

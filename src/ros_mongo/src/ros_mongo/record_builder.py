@@ -7,6 +7,7 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 import genpy
 
 import ros_mongo.msgtypes as msgtypes
+from ros_mongo.chunks import ChunkRecord
 from ros_mongo.decoding import DecodePolicy
 from ros_mongo.errors import UnknownTypeError
 from ros_mongo.records import MessageRecord, TopicInfo, make_record, new_message_id, record_from_bytes
@@ -57,7 +58,10 @@ class RecordBuilder:
     def complete(self, entries: list) -> None:
         """Decode the fields of spooled records that went to the spool undecoded (topic infos
         among `entries` are learnt: the spool may come from an earlier recorder)."""
+        flat: list = []
         for entry in entries:
+            flat.extend(entry.records if isinstance(entry, ChunkRecord) else [entry])
+        for entry in flat:
             if isinstance(entry, TopicInfo):
                 self.topics.setdefault((entry.topic, entry.msg_type, entry.md5sum, entry.callerid), entry)
             elif entry.fields is None and entry.header_stamp is None:

@@ -21,8 +21,9 @@ unexpected shape, a bug) spools its batch, reports the failure and is restarted 
 spool refuses it (SpoolFull: size limit or minimum free space), or a quarantine write fails.
 
 What a SIGKILL can lose: only messages not yet written to the database or the spool, i.e. those
-received during the last `batch_period` plus the batches waiting for their turn to be written
-(bounded by `max_queue_bytes`). Everything counted as stored or spooled survives (the spool is drained
+received during the last `batch_period` (on chunked topics, ros_mongo.chunks: the last chunk's
+`CHUNK_SPAN` plus `batch_period`) plus the batches waiting for their turn to be written (bounded by
+`max_queue_bytes`). Everything counted as stored or spooled survives (the spool is drained
 by the next recorder using it). Per topic, the database plus the spool hold a gap-free prefix of the
 received messages, except when the queue overflowed (spilled messages overtake queued ones) or the
 disk was full (a batch that could not be spooled waits in memory and is written after later ones).
@@ -36,6 +37,7 @@ from typing import Deque, Dict, List, Optional, Sequence, Tuple
 import genpy
 
 from ros_mongo.bounded_spool import BoundedSpool
+from ros_mongo.chunks import Chunker, ChunkPolicy, ChunkRecord, PendingChunk, message_count
 from ros_mongo.decoding import DecodePolicy
 from ros_mongo.errors import DocumentsRejected, SpoolError, StoreError
 from ros_mongo.quarantine import Quarantine
@@ -70,6 +72,8 @@ class Recorder:
         quarantine_path: where refused documents go (default: the spool path + ".quarantine").
         decode: how much of each topic's messages is decoded into queryable fields
             (ros_mongo.decoding; default: everything).
+        chunks: which topics are stored as chunks (ros_mongo.chunks; default: none), for stores
+            that take them (CouchDB).
     """
 
     def __init__(self, store: MessageStore, spool: BoundedSpool, *, batch_size: int = 500,
@@ -77,7 +81,7 @@ class Recorder:
                  writers: int = 2, session_id: Optional[str] = None, robot_id: Optional[str] = None,
                  tags: Sequence[str] = (), topic_tags: Optional[Dict[str, Sequence[str]]] = None,
                  quarantine_path: Optional[str] = None, author: Optional[str] = None,
-                 decode: Optional[DecodePolicy] = None):
+                 decode: Optional[DecodePolicy] = None, chunks: Optional[ChunkPolicy] = None):
         if batch_size < 1 or batch_period <= 0 or max_queue_bytes < 1 or retry_period <= 0 or writers < 1:
             raise ValueError(f"batch_size, batch_period, max_queue_bytes, retry_period and writers must "
                              f"be positive, got {batch_size!r}, {batch_period!r}, {max_queue_bytes!r}, "
@@ -95,6 +99,12 @@ class Recorder:
         self.records = RecordBuilder(self._topics, decode=decode or DecodePolicy(), tags=tags,
                                      topic_tags=topic_tags, session_id=session_id, robot_id=robot_id,
                                      author=author, max_array_len=store.max_array_len)
+        self.chunks = chunks if chunks is not None and chunks.active else None
+        if self.chunks is not None and not getattr(store, "chunks", False):
+            log.warning("%s stores no chunks: every message is stored as a document of its own",
+                        store.backend_title)
+            self.chunks = None
+        self._chunker = Chunker(self.chunks.max_messages if self.chunks else 1)
         self._stopping = False
         self._deadline = float("inf")
         self._threads: List[threading.Thread] = []
@@ -123,8 +133,13 @@ class Recorder:
                 self._topics[key] = info
                 self._queue.append((info,))
             if self._queued_bytes + cost <= self.max_queue_bytes:
-                self._queue.append((key, raw, receive.secs, receive.nsecs))
                 self._queued_bytes += cost
+                stamp = receive.secs + receive.nsecs * 1e-9
+                if self.chunks is not None and self.chunks.chunked(topic, stamp):
+                    self._queue.extend(self._chunker.add(key, raw, receive.secs, receive.nsecs,
+                                                         time.monotonic()))
+                else:
+                    self._queue.append((key, raw, receive.secs, receive.nsecs))
                 if len(self._queue) >= self.batch_size:
                     self._cond.notify()
                 return True
@@ -149,7 +164,10 @@ class Recorder:
         with self._count_lock:
             counts = dict(self._counts)
         counts["dropped"] += self.spool.dropped_total()
-        counts.update(spool_pending=self.spool.pending_records, queued=len(self._queue),
+        with self._cond:
+            queued = sum(_messages(item) for item in self._queue) + sum(
+                len(chunk) for chunk in self._chunker.open.values())
+        counts.update(spool_pending=self.spool.pending_records, queued=queued,
                       queued_bytes=self._queued_bytes)
         return counts
 
@@ -232,13 +250,15 @@ class Recorder:
                 if remaining <= 0:
                     break
                 self._cond.wait(remaining)
+            if self._chunker.open:  # chunks open long enough (all when stopping) join the queue
+                self._queue.extend(self._chunker.flush() if self._stopping
+                                   else self._chunker.due(time.monotonic()))
             items, size, count = [], 0, 0
             while self._queue and count < self.batch_size and size < 32 * 1024 * 1024:
                 item = self._queue.popleft()
                 items.append(item)
-                if len(item) > 1:
-                    count += 1
-                    size += len(item[1]) + ITEM_OVERHEAD
+                count += _messages(item)
+                size += _cost(item)
             self._queued_bytes -= size
             if not items:
                 return items, None
@@ -249,11 +269,11 @@ class Recorder:
     def _write(self, items: List[tuple], ticket: int) -> None:
         """Decode (in parallel with other writers), then write in ticket order."""
         try:
-            entries = [item[0] if len(item) == 1 else self.records.record(*item) for item in items]
+            entries = [self._entry(item, self.records.record) for item in items]
         except Exception as err:  # noqa: BLE001 - a decoding bug must not lose the batch
             log.exception("cannot decode a batch; storing it without decoded fields")
             self._set_fault(f"decoding failed: {type(err).__name__}: {err}")
-            entries = [item[0] if len(item) == 1 else self.records.raw(*item) for item in items]
+            entries = [self._entry(item, self.records.raw) for item in items]
         with self._order:
             while self._turn != ticket:
                 self._order.wait()
@@ -263,6 +283,14 @@ class Recorder:
             with self._order:
                 self._turn += 1
                 self._order.notify_all()
+
+    @staticmethod
+    def _entry(item, build):
+        """The entry of a queue item: a topic info, a message's record or a chunk's."""
+        if isinstance(item, PendingChunk):
+            return ChunkRecord([build(item.key, raw, secs, nsecs)
+                                for raw, secs, nsecs in zip(item.raws, item.secs, item.nsecs)])
+        return item[0] if len(item) == 1 else build(*item)
 
     def _write_in_turn(self, entries: list, items: List[tuple]) -> None:
         unexpected = None
@@ -286,11 +314,11 @@ class Recorder:
     def _spool(self, entries: list) -> None:
         with self._spill_lock:
             self.spool.append(entries, self._topics)
-        self._add("spooled", sum(isinstance(e, MessageRecord) for e in entries))
+        self._add("spooled", sum(message_count(e) for e in entries))
 
     def _keep_in_memory(self, items: List[tuple], err: SpoolError) -> None:
         """The spool is full: back to the front of the queue while memory lasts, else dropped."""
-        size = sum(len(item[1]) + ITEM_OVERHEAD for item in items if len(item) > 1)
+        size = sum(_cost(item) for item in items)
         with self._cond:
             # stopping: kept (and retried) until the stop's deadline, as the server may be back
             if (self._queued_bytes + size <= self.max_queue_bytes
@@ -306,8 +334,9 @@ class Recorder:
         else:
             per_topic: Dict[str, int] = {}
             for item in items:
-                if len(item) > 1:
-                    per_topic[item[0][0]] = per_topic.get(item[0][0], 0) + 1
+                if _messages(item):
+                    topic = item.key[0] if isinstance(item, PendingChunk) else item[0][0]
+                    per_topic[topic] = per_topic.get(topic, 0) + _messages(item)
             self._drop(per_topic, f"memory and spool both exhausted: {err}")
 
     def _add(self, counter: str, value: int) -> None:
@@ -317,7 +346,7 @@ class Recorder:
     def _store(self, entries: list) -> None:
         """Store entries; documents refused on their own merits go to the quarantine file. Any
         other StoreError propagates (nothing was lost: ids dedupe the retry)."""
-        records = [e for e in entries if isinstance(e, MessageRecord)]
+        records = [e for e in entries if isinstance(e, (MessageRecord, ChunkRecord))]
         for entry in entries:
             if isinstance(entry, TopicInfo):
                 self.store.put_topic(entry)
@@ -331,10 +360,10 @@ class Recorder:
             if len(refused) != err.rejected:  # the server did not name them all: one at a time
                 refused = [r for r in records if not self._insert_alone(r)]
             self._quarantine(refused, err)
-            self._add("stored", len(records) - len(refused))
+            self._add("stored", sum(map(message_count, records)) - sum(map(message_count, refused)))
             return
         # counted once: a failed attempt that reached the database anyway was not counted
-        self._add("stored", len(records))
+        self._add("stored", sum(map(message_count, records)))
 
     def _insert_alone(self, record: MessageRecord) -> bool:
         try:
@@ -344,18 +373,19 @@ class Recorder:
             return False
 
     def _quarantine(self, refused: List[MessageRecord], err: DocumentsRejected) -> None:
-        self._add("rejected", len(refused))
+        count = sum(map(message_count, refused))
+        self._add("rejected", count)
         try:
             self.quarantine.add(refused, self._topics)
         except SpoolError as error:
             per_topic: Dict[str, int] = {}
             for record in refused:
-                per_topic[record.topic] = per_topic.get(record.topic, 0) + 1
+                per_topic[record.topic] = per_topic.get(record.topic, 0) + message_count(record)
             self._drop(per_topic, f"refused by the database and the quarantine file cannot be "
                                   f"written: {error}")
             return
-        self._add("quarantined", len(refused))
-        log.error("the database refused %d messages on their own merits (kept in %s): %s", len(refused),
+        self._add("quarantined", count)
+        log.error("the database refused %d messages on their own merits (kept in %s): %s", count,
                   self.quarantine.path, err)
 
     # -- faults ----------------------------------------------------------------------------------
@@ -393,7 +423,7 @@ class Recorder:
 
     def _drain_once(self) -> None:
         entries, token = self.spool.read(max_entries=self.batch_size, max_bytes=32 * 1024 * 1024)
-        records = sum(isinstance(e, MessageRecord) for e in entries)
+        records = sum(message_count(e) for e in entries)
         self.records.complete(entries)
         try:
             self._store(entries)
@@ -405,3 +435,17 @@ class Recorder:
         self.spool.commit(token, records)
         if not self.spool.pending:
             log.info("spool drained")
+
+
+def _messages(item) -> int:
+    """Messages a queue item holds (a topic info: 0)."""
+    if isinstance(item, PendingChunk):
+        return len(item)
+    return 0 if len(item) == 1 else 1
+
+
+def _cost(item) -> int:
+    """Bytes a queue item counts for in `max_queue_bytes`."""
+    if isinstance(item, PendingChunk):
+        return item.nbytes + ITEM_OVERHEAD * len(item)
+    return 0 if len(item) == 1 else len(item[1]) + ITEM_OVERHEAD

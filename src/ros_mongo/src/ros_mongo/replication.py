@@ -57,7 +57,7 @@ __all__ = ["ReplicationError", "ReplicationUnavailable", "ReplicationRefused", "
 
 logger = logging.getLogger(__name__)
 
-REPLICATED_KINDS = ("message", "topic")
+REPLICATED_KINDS = ("message", "chunk", "topic")
 # Documents per replication batch on a pouchdb-server store (its default is 100; Apache CouchDB's
 # worker_batch_size defaults to 500). Each batch costs a _revs_diff, a _bulk_docs and two
 # checkpoint writes, so at 100 Hz a backlog drains in larger steps.

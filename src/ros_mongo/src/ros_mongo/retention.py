@@ -67,7 +67,7 @@ class Retention:
         found = {}
         for row in rows:
             doc = row.get("doc") or {}
-            if doc.get("kind") != "message" or not self.spec.selects(doc):
+            if doc.get("kind") not in ("message", "chunk") or not self.spec.selects(doc):
                 continue
             stamp = doc.get("receive_time")
             if isinstance(stamp, (int, float)) and not isinstance(stamp, bool) and stamp < cutoff:

@@ -59,7 +59,7 @@ class RecorderNode:
             retry_period=config.retry_period, writers=config.writers, session_id=self.session_id,
             robot_id=self.robot_id, tags=config.tags, topic_tags=config.topic_tags,
             quarantine_path=config.quarantine_path or None, author=config.author,
-            decode=config.decode_policy())
+            decode=config.decode_policy(), chunks=config.chunk_policy())
         self.subscribers: Dict[str, rospy.Subscriber] = {}
         self.topic_counts: Dict[str, int] = {}
         self._last_log: Optional[Dict[str, int]] = None

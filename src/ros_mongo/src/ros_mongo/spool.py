@@ -23,6 +23,7 @@ from typing import Dict, List, Tuple, Union
 
 import orjson
 
+from ros_mongo.chunks import ChunkRecord, message_count
 from ros_mongo.errors import SpoolError
 from ros_mongo.records import MessageRecord, TopicInfo
 
@@ -34,7 +35,7 @@ DEFAULT_MIN_FREE_BYTES = 1 << 30
 MAGIC = b"RMS1"
 _FRAME = struct.Struct("<4sIII")
 _EXCLUSIVE_NONBLOCKING = fcntl.LOCK_EX + fcntl.LOCK_NB  # (distinct bits; "|" trips vermin's 3.10 check)
-Entry = Union[TopicInfo, MessageRecord]
+Entry = Union[TopicInfo, MessageRecord, ChunkRecord]
 
 
 class SpoolFull(SpoolError):
@@ -172,6 +173,9 @@ class Spool:
                     reader.seek(payload_len, os.SEEK_CUR)
                     if header.get("kind") == "message":
                         counts[header["topic"]] = counts.get(header["topic"], 0) + 1
+                    elif header.get("kind") == "chunk":
+                        topic = header["records"][0]["topic"]
+                        counts[topic] = counts.get(topic, 0) + len(header["records"])
                     offset += _FRAME.size + header_len + payload_len
         return counts
 
@@ -219,7 +223,7 @@ class Spool:
                 if entry is None:
                     break
                 offset += length
-                records += isinstance(entry, MessageRecord)
+                records += message_count(entry)
         return offset, records
 
 
@@ -254,7 +258,7 @@ def frames(entries: List[Entry]) -> Tuple[bytes, int]:
     parts, records = [], 0
     for entry in entries:
         parts.append(_frame(entry))
-        records += isinstance(entry, MessageRecord)
+        records += message_count(entry)
     return b"".join(parts), records
 
 
@@ -262,6 +266,11 @@ def _frame(entry: Entry) -> bytes:
     if isinstance(entry, TopicInfo):
         header = {"kind": "topic", **{name: getattr(entry, name) for name in _TOPIC_FIELDS}}
         payload = b""
+    elif isinstance(entry, ChunkRecord):  # its records' fields, their bytes one after another
+        header = {"kind": "chunk", "records": [{name: getattr(record, name) for name in _RECORD_FIELDS}
+                                               for record in entry.records],
+                  "sizes": [len(record.raw) for record in entry.records]}
+        payload = entry.raw
     else:  # the fields as they are (not deep-copied as dataclasses.asdict would)
         header = {"kind": "message", **{name: getattr(entry, name) for name in _RECORD_FIELDS}}
         payload = entry.raw
@@ -287,5 +296,12 @@ def _read_frame(reader) -> Tuple[Union[Entry, None], int]:
         return None, 0
     header = orjson.loads(header_bytes)
     kind = header.pop("kind")
-    entry = TopicInfo(**header) if kind == "topic" else MessageRecord(raw=payload, **header)
+    if kind == "chunk":
+        records, at = [], 0
+        for fields_, size in zip(header["records"], header["sizes"]):
+            records.append(MessageRecord(raw=payload[at:at + size], **fields_))
+            at += size
+        entry: Entry = ChunkRecord(records)
+    else:
+        entry = TopicInfo(**header) if kind == "topic" else MessageRecord(raw=payload, **header)
     return entry, _FRAME.size + header_len + payload_len

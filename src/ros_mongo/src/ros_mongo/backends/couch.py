@@ -46,6 +46,15 @@ import pybase64
 import requests
 
 from ros_mongo.backends.base import MessageStore, register_backend
+from ros_mongo.chunks import (
+    CHUNK_KEYS,
+    CHUNK_SPAN,
+    ChunkRecord,
+    chunk_doc,
+    expand,
+    fields_match,
+    sorted_messages,
+)
 from ros_mongo.documents import META_KEYS, message_doc, query_conditions, to_selector, topic_doc
 from ros_mongo.errors import BatchTooLarge, QueryError, StoreError, StoreRefused, StoreUnavailable
 from ros_mongo.query import Query
@@ -68,6 +77,7 @@ class CouchStore(MessageStore):
 
     backend = "couchdb"
     backend_title = "CouchDB"
+    chunks = True   # stores ros_mongo.chunks.ChunkRecord (chunked topics)
 
     def __init__(self, url: str, *, timeout: float = 30.0, page_size: int = 200,
                  tls_ca_file: Optional[str] = None, tls_cert_file: Optional[str] = None,
@@ -197,15 +207,25 @@ class CouchStore(MessageStore):
 
     # -- writing -----------------------------------------------------------------------------
     def _batch_item(self, record: MessageRecord) -> Tuple[Tuple[str, bool, Tuple[bytes, ...]], int]:
-        blob = len(record.raw) > self.blob_threshold
-        parts = self._encode(record, blob)
+        chunk = isinstance(record, ChunkRecord)
+        blob = chunk or len(record.raw) > self.blob_threshold
+        parts = self._encode(record, blob, chunk)
         return (record.id, blob, parts), sum(len(part) for part in parts)
 
-    def _encode(self, record: MessageRecord, blob: bool) -> Tuple[bytes, ...]:
+    def _encode(self, record: MessageRecord, blob: bool, chunk: bool = False) -> Tuple[bytes, ...]:
         """The document's JSON in parts (joined once, with the whole request: a base64 image is
         not copied once per document); with its bytes as the attachment `raw` and its revision
-        given (`message_rev`, see `_write_blobs`) when `blob`."""
-        doc = message_doc(record)
+        given (`message_rev`, see `_write_blobs`) when `blob` (always for a chunk: its messages'
+        bytes, concatenated)."""
+        fields64 = None
+        if chunk:  # the decoded fields as an attachment: the server does not parse them
+            doc = chunk_doc(record)
+            msgs = doc.pop("msgs")
+            encoded = _dumps(msgs) if any(m is not None for m in msgs) else None
+            if encoded is not None:
+                doc["fields"], fields64 = "attachment", pybase64.b64encode(encoded)
+        else:
+            doc = message_doc(record)
         raw64 = pybase64.b64encode(record.raw)  # SIMD base64: a tenth of binascii's CPU for images
         if not blob:
             doc["raw"] = raw64.decode("ascii")
@@ -218,9 +238,11 @@ class CouchStore(MessageStore):
                                  f"document even without its fields")
         if not blob:
             return (body,)
-        return (b'{"_rev":"', message_rev(record.id).encode("ascii"), b'",', body[1:-1],
-                b',"_attachments":{"raw":{"content_type":"application/octet-stream","data":"', raw64,
-                b'"}}}')
+        parts = (b'{"_rev":"', message_rev(record.id).encode("ascii"), b'",', body[1:-1],
+                 b',"_attachments":{"raw":{"content_type":"application/octet-stream","data":"', raw64, b'"}')
+        if fields64 is not None:
+            parts += (b',"fields":{"content_type":"application/octet-stream","data":"', fields64, b'"}')
+        return parts + (b"}}",)
 
     def _write_batch(self, items: List[Tuple[str, bool, Tuple[bytes, ...]]], errors: list) -> int:
         """Documents with inline bytes in one `_bulk_docs` (a conflict: stored by an earlier
@@ -304,24 +326,49 @@ class CouchStore(MessageStore):
 
     def _docs(self, query: Query, newest_first: bool, limit: Optional[int],
               decoded: bool) -> Iterator[Tuple[dict, Optional[bytes]]]:
-        docs = self._merged(query, newest_first, limit, None if decoded else list(META_KEYS) + ["raw"])
-        return ((doc, pybase64.b64decode(doc["raw"]) if doc.get("raw") is not None else None)
-                for doc in docs)
+        fields = None if decoded else list(META_KEYS) + ["raw"]
+        return self._merged(query, newest_first, limit, fields, True, decoded)
 
     def _count(self, query: Query) -> int:
-        return sum(1 for _ in self._merged(query, False, None, ["_id", "receive_time"]))
+        return sum(1 for _ in self._merged(query, False, None, ["_id", "receive_time"], False, False))
 
-    def _merged(self, query: Query, newest_first: bool, limit: Optional[int],
-                fields: Optional[List[str]]) -> Iterator[dict]:
-        """One sorted stream per topic (each uses the topic+time index), merged by time."""
+    def _merged(self, query: Query, newest_first: bool, limit: Optional[int], fields: Optional[List[str]],
+                with_bytes: bool, decoded: bool) -> Iterator[Tuple[dict, Optional[bytes]]]:
+        """One sorted stream per topic (each uses the topic+time index), chunks expanded into their
+        messages (ros_mongo.chunks), merged by time: (message document, its bytes when inline or
+        `with_bytes` for a chunk's; a chunk's decoded fields when `decoded`)."""
         if limit == 0:
             return iter(())
         topics = query.topics or [None]
-        streams = [self._stream(query, topic, newest_first, limit, fields) for topic in topics]
-        if len(streams) == 1:
-            return streams[0]
-        merged = heapq.merge(*streams, key=lambda d: (d["receive_time"], d["_id"]), reverse=newest_first)
+        # a chunk starts up to CHUNK_SPAN before the messages it holds; messages outside the range
+        # and chunk messages failing a field condition are left out in `_messages`
+        wide = query if query.start_time is None else dataclasses.replace(
+            query, start_time=query.start_time - CHUNK_SPAN)
+        exact = query.start_time is None and not query.fields  # every document yields a match
+        if fields is not None:
+            fields = sorted(set(fields) | set(CHUNK_KEYS) | {"_id", "receive_time"})
+        streams = [self._messages(self._stream(wide, topic, newest_first, limit if exact else None, fields),
+                                  query, newest_first, with_bytes, decoded) for topic in topics]
+        merged = streams[0] if len(streams) == 1 else heapq.merge(
+            *streams, key=lambda m: (m[0]["receive_time"], m[0]["_id"]), reverse=newest_first)
         return merged if limit is None else _take(merged, limit)
+
+    def _messages(self, docs: Iterator[dict], query: Query, newest_first: bool, with_bytes: bool,
+                  decoded: bool) -> Iterator[Tuple[dict, Optional[bytes]]]:
+        """Documents of one sorted stream as (message document, bytes), chunks expanded."""
+        def items():
+            for doc in docs:
+                if doc.get("kind") == "chunk":
+                    raw = self._load_blob(doc["_id"]) if with_bytes else None
+                    msgs = self.chunk_fields(doc) if decoded or query.fields else None
+                    yield doc, [(m, b) for m, b in expand(doc, raw, msgs) if _chunk_match(m, query)]
+                else:
+                    yield doc, (pybase64.b64decode(doc["raw"]) if doc.get("raw") is not None else None)
+        low, high = query.start_time, query.end_time
+        for doc, raw in sorted_messages(items(), newest_first):
+            time_ = doc["receive_time"]
+            if (low is None or time_ >= low) and (high is None or time_ <= high):
+                yield doc, raw
 
     def _stream(self, query: Query, topic: Optional[str], newest_first: bool, limit: Optional[int],
                 fields: Optional[List[str]]) -> Iterator[dict]:
@@ -408,20 +455,39 @@ class CouchStore(MessageStore):
                 return
             key, skip = ids[-1], 1
 
-    def _load_blob(self, message_id: str) -> bytes:
-        response = self._request("GET", f"/{quote(message_id, safe='')}/raw", ok=(200, 404),
+    def _load_blob(self, message_id: str, name: str = "raw") -> bytes:
+        response = self._request("GET", f"/{quote(message_id, safe='')}/{name}", ok=(200, 404),
                                  headers={"Accept": "application/octet-stream"})
         if response.status_code == 404:
-            raise StoreError(f"message {message_id} has no stored bytes in {self.url}")
+            raise StoreError(f"message {message_id} has no stored {'bytes' if name == 'raw' else name} "
+                             f"in {self.url}")
         return response.content
+
+    def chunk_fields(self, doc: dict) -> Optional[list]:
+        """The decoded fields of a chunk's messages (None when it stores none)."""
+        if doc.get("fields") != "attachment":
+            return None
+        msgs = orjson.loads(self._load_blob(doc["_id"], "fields"))
+        if not isinstance(msgs, list) or len(msgs) != doc["count"]:
+            raise StoreError(f"chunk {doc['_id']} in {self.url} holds unreadable fields")
+        return msgs
 
 
 def _selector(query: Query, topic: Optional[str]) -> Dict[str, object]:
     """The query's selector for one topic's stream (or all topics), without the time range: the
-    pager adds that."""
+    pager adds that. Chunks are selected by their metadata alone (their messages' fields are
+    checked message by message: `_chunk_match`)."""
     one_topic = dataclasses.replace(query, topics=[topic] if topic else None, start_time=None,
                                     end_time=None)
-    return to_selector(query_conditions(one_topic))
+    selector = to_selector(query_conditions(one_topic))
+    if "$or" in selector:  # conditions on decoded fields, as [{"$and": [...]}]
+        selector["$or"] = selector["$or"] + [{"kind": "chunk"}]
+    return selector
+
+
+def _chunk_match(message: dict, query: Query) -> bool:
+    """Whether a message of a chunk meets the query's conditions on decoded fields."""
+    return not query.fields or fields_match(message.get("msg"), query.fields)
 
 
 class _Pager:
