@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # One idempotent set-up for a fresh Debian 12 machine, run by `make demo` and `make test`:
 #   1. Debian packages: ROS 1 (Noetic versions, from Debian), python3-venv, Node.js/npm, rviz+Xvfb
-#   2. .venv: made from /usr/bin/python3 with system site packages, pinned pip requirements
+#   2. .venv: made from /usr/bin/python3 with system site packages, pinned requirements installed
+#      with uv (pip when uv cannot run), at the same time as 3
 #   3. tools/pouchdb-server: the CouchDB-compatible server from npm (pinned by package-lock.json)
 #   4. the catkin workspace: catkin_make (devel space)
 # Each step is skipped when what it would do is already done (stamps in .setup/), so a second run
@@ -64,21 +65,44 @@ step_apt() {
   log "Debian packages: done in $(elapsed "$start")"
 }
 
+pip_config_sources() {  # the index options this machine's pip is configured with, for uv
+  local key value item
+  for key in find-links extra-index-url; do
+    value=$(.venv/bin/python -m pip config get "global.$key" 2>/dev/null || true)
+    [ "$key" = find-links ] && value="$value ${PIP_FIND_LINKS:-}"
+    [ "$key" = extra-index-url ] && value="$value ${PIP_EXTRA_INDEX_URL:-}"
+    for item in $value; do printf -- '--%s\n%s\n' "$key" "$item"; done
+  done
+}
+
+install_requirements() {  # uv (parallel downloads, bytecode compiled); pip when uv cannot run
+  local sources=()
+  mapfile -t sources < <(pip_config_sources)
+  if .venv/bin/python -m pip install -q --disable-pip-version-check -c constraints.txt uv \
+      && .venv/bin/python -m uv pip install --python .venv/bin/python --compile-bytecode \
+        --index-strategy unsafe-best-match "${sources[@]}" \
+        -r requirements.txt -c constraints.txt --excludes requirements-exclude.txt; then
+    return 0
+  fi
+  echo "uv failed: installing with pip" >&2
+  .venv/bin/python -m pip install --disable-pip-version-check \
+    -r requirements.txt -c constraints.txt
+}
+
 step_venv() {
   local start want
   start=$(date +%s)
-  want=$(hash_of requirements.txt constraints.txt)
+  want=$(hash_of requirements.txt constraints.txt requirements-exclude.txt)
   if [ -x .venv/bin/python ] && stamp_matches venv "$want"; then
     log "Python venv: up to date"
     return
   fi
   if [ ! -x .venv/bin/python ]; then
-    /usr/bin/python3 -m venv --system-site-packages .venv
+    /usr/bin/python3 -m venv --system-site-packages .venv || return 1
   fi
-  log "Python venv: installing pinned requirements (a few minutes the first time)"
-  .venv/bin/python -m pip install -q --disable-pip-version-check \
-    -r requirements.txt -c constraints.txt >"$STAMPS/pip.log" 2>&1 \
-    || { grep -v 'is ignored: it is neither' "$STAMPS/pip.log" | tail -30; exit 1; }
+  log "Python venv: installing pinned requirements (about a minute the first time)"
+  install_requirements >"$STAMPS/pip.log" 2>&1 \
+    || { grep -v 'is ignored: it is neither' "$STAMPS/pip.log" | tail -30; return 1; }
   echo "$want" >"$STAMPS/venv"
   log "Python venv: done in $(elapsed "$start")"
 }
@@ -93,7 +117,7 @@ step_pouchdb() {
   fi
   log "pouchdb-server: npm ci (about 2 minutes the first time)"
   (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error) >"$STAMPS/npm.log" 2>&1 \
-    || { tail -30 "$STAMPS/npm.log"; exit 1; }
+    || { tail -30 "$STAMPS/npm.log"; return 1; }
   echo "$want" >"$STAMPS/pouchdb"
   log "pouchdb-server: done in $(elapsed "$start")"
 }
@@ -121,14 +145,17 @@ step_catkin() {
 }
 
 main() {
-  local start
+  local start npm_pid
   start=$(date +%s)
   # One set-up at a time (parallel `make test` runs would otherwise race in catkin_make and pip).
   exec 9>"$STAMPS/lock"
   flock 9
   step_apt
-  step_venv
-  step_pouchdb
+  # The venv and pouchdb-server mostly wait on downloads: both at once.
+  step_pouchdb &
+  npm_pid=$!
+  step_venv || { wait "$npm_pid" || true; exit 1; }
+  wait "$npm_pid" || exit 1
   step_catkin
   log "ready in $(elapsed "$start"); use it by hand with: source env.sh"
 }
