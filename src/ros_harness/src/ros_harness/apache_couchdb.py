@@ -122,6 +122,16 @@ class _CouchCopy:
                                f"{out[-3000:]}")
         return out
 
+    def pids(self) -> List[int]:
+        """The running beam.smp processes of this copy."""
+        raise NotImplementedError
+
+    def _log_cpu(self) -> None:
+        """The CPU the running beam.smp processes used, into scripts.log (before they stop)."""
+        with open(self.dir / "scripts.log", "a") as log:
+            for pid in self.pids():
+                log.write(f"beam.smp pid {pid}: {beam_cpu_seconds(pid):.2f} s CPU (user + system)\n")
+
     # -- HTTP as the admin --------------------------------------------------------------------
     @property
     def port(self) -> int:
@@ -231,6 +241,7 @@ class ApacheCouchDB(_CouchCopy):
 
     def stop(self) -> None:
         if self.ports and (self.dir / "couch.pid").exists():
+            self._log_cpu()
             self._script(NODE_SCRIPT, ["stop", str(self.dir)])
 
     def restart(self) -> "ApacheCouchDB":
@@ -282,6 +293,7 @@ class CouchDBCluster(_CouchCopy):
 
     def stop(self) -> None:
         if self.ports and self.dir.is_dir():
+            self._log_cpu()
             self._script(CLUSTER_SCRIPT, ["stop", str(self.dir)])
 
 
