@@ -189,7 +189,8 @@ class RetrieverParams(NodeConfig):
                                     "master knows of to connect")
     prefetch: int = param(100000, "messages read ahead, at most (filled before playing)")
     prefetch_mb: float = param(1024.0, "MB read ahead, at most")
-    preroll_timeout: float = param(15.0, "longest wait (s) for the read-ahead before playing")
+    preroll_timeout: float = param(60.0, "longest wait (s) for the read-ahead before playing (loading while "
+                                         "playing costs timing on a busy machine)")
     queue_size: int = param(100, "outgoing queue per subscriber of topics above sync_max_bytes")
     sync_max_bytes: int = param(16777216, "topics with larger messages are published through a queue; "
                                           "smaller ones synchronously (exact timing)")

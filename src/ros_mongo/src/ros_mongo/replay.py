@@ -71,7 +71,7 @@ class Replayer:
                  clock: Optional[Callable[[genpy.Time], None]] = None, rate: float = 1.0,
                  start_offset: float = 0.0, duration: float = 0.0, loop: bool = False,
                  fixed_rate: float = 0.0, clock_period: float = 0.01, prefetch: int = 100000,
-                 prefetch_mb: float = 1024.0, preroll_timeout: float = 15.0, lane_min_bytes: int = 65536):
+                 prefetch_mb: float = 1024.0, preroll_timeout: float = 60.0, lane_min_bytes: int = 65536):
         for name, value in (("rate", rate), ("clock_period", clock_period)):
             if not value > 0:
                 raise ValueError(f"{name} must be positive, got {value!r}")
@@ -199,7 +199,9 @@ class Replayer:
 def _sleep_until(due: float, stop: threading.Event, tick: Optional[Callable[[], None]] = None,
                  tick_period: float = 0.01) -> bool:
     """Sleep until `due`, spinning through its last fraction of a millisecond and calling `tick`
-    every `tick_period` meanwhile; False if `stop` was set."""
+    every `tick_period` meanwhile; False if `stop` was set. The spin gives the interpreter lock
+    away on every turn, so a thread spinning towards its message never holds up another thread's
+    message that is due first (holding it, a spinner keeps it for up to the switch interval)."""
     while True:
         remaining = due - time.monotonic()
         if remaining <= 0:
@@ -212,6 +214,8 @@ def _sleep_until(due: float, stop: threading.Event, tick: Optional[Callable[[], 
                 step = min(step, tick_period)
                 tick()
             time.sleep(min(step, 0.1))
+        else:
+            time.sleep(0)  # spinning: the interpreter lock goes to a thread due first, at once
 
 
 class _Lane:
