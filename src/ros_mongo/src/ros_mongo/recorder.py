@@ -95,6 +95,7 @@ class Recorder:
         self._cond = threading.Condition()
         self._queue: Deque[tuple] = deque()
         self._queued_bytes = 0
+        self._queued_messages = 0   # in the queue or in open chunks
         self._topics: Dict[_Key, TopicInfo] = {}
         self.records = RecordBuilder(self._topics, decode=decode or DecodePolicy(), tags=tags,
                                      topic_tags=topic_tags, session_id=session_id, robot_id=robot_id,
@@ -134,6 +135,7 @@ class Recorder:
                 self._queue.append((info,))
             if self._queued_bytes + cost <= self.max_queue_bytes:
                 self._queued_bytes += cost
+                self._queued_messages += 1
                 stamp = receive.secs + receive.nsecs * 1e-9
                 if self.chunks is not None and self.chunks.chunked(topic, stamp):
                     self._queue.extend(self._chunker.add(key, raw, receive.secs, receive.nsecs,
@@ -164,10 +166,7 @@ class Recorder:
         with self._count_lock:
             counts = dict(self._counts)
         counts["dropped"] += self.spool.dropped_total()
-        with self._cond:
-            queued = sum(_messages(item) for item in self._queue) + sum(
-                len(chunk) for chunk in self._chunker.open.values())
-        counts.update(spool_pending=self.spool.pending_records, queued=queued,
+        counts.update(spool_pending=self.spool.pending_records, queued=self._queued_messages,
                       queued_bytes=self._queued_bytes)
         return counts
 
@@ -260,6 +259,7 @@ class Recorder:
                 count += _messages(item)
                 size += _cost(item)
             self._queued_bytes -= size
+            self._queued_messages -= count
             if not items:
                 return items, None
             ticket = self._tickets
@@ -325,6 +325,7 @@ class Recorder:
                     and (not self._stopping or time.monotonic() < self._deadline)):
                 self._queue.extendleft(reversed(items))
                 self._queued_bytes += size
+                self._queued_messages += sum(_messages(item) for item in items)
                 kept = True
             else:
                 kept = False
