@@ -27,8 +27,8 @@ from ros_harness import wait_until
 pytestmark = pytest.mark.ros
 
 NS = "/people_rec"
-WANTED = 6          # successful demonstrations to learn from
-ATTEMPTS = 12       # drives at most (a person-like drive may collide or time out)
+WANTED = 4          # successful demonstrations to learn from (the check drives from 4 of them)
+ATTEMPTS = 8        # drives at most (a person-like drive may collide or time out)
 # the demonstrator: 0.5 m/s, 200 ms reaction delay, five stick positions, hand noise
 DEMONSTRATOR = Person(speed=0.5, delay=2, levels=5, noise=0.04, side=1.0, clearance=0.15, overshoot=0.0,
                       turn_gain=2.5, idle_steps=10)
@@ -92,6 +92,7 @@ class JoystickPerson:
             sub.unregister()
 
 
+@pytest.mark.timeout(1200)      # real-time drives, learning and its check on a busy machine
 def test_person_like_joystick_demos_recorded_through_ros_are_learnable(rospy_node, roslaunch, tmp_path):
     launch = roslaunch("lfd_controller", "teleop_record.launch", ns=NS, scenario="static_obstacle",
                        seed=3, bag_dir=str(tmp_path / "bags"), source="person_like",
@@ -149,15 +150,13 @@ def test_person_like_joystick_demos_recorded_through_ros_are_learnable(rospy_nod
     # the joystick's few stick positions show in the commands (quantised, with hand noise)
     assert np.median(np.abs(np.concatenate([d.actions[:, 0] for d in good]))) > 0.2
     reward, learner = fit_person_reward(good)
-    # the person pipeline's check: the controller's own drives from the demonstrations' starts
-    # match their mean speed, time to goal and closest approach - or, never refused for crawling.
-    # A loaded machine delays the joystick person's reactions, so its recorded paths can wander
-    # further than the controller's straighter ones: then the time cannot match both the speed
-    # and the path, and the check says so (the verdicts themselves: test_acceptance.py)
+    # the person pipeline's check: from the demonstrations' starts and nearby ones the controller
+    # reaches the goal where the person did, without collisions and without crawling (a loaded
+    # machine delays the joystick person's reactions, so its recorded paths can wander further
+    # than the controller's straighter ones: a mismatch in time or speed is only a warning; the
+    # verdicts themselves: test_acceptance.py)
     report = learner.acceptance_
-    missed = {name for name, ok in report.matched.items() if not ok}
-    assert report.accepted or (missed <= {"time", "mean_speed"}
-                               and report.driven["time"] < report.demonstrated["time"]), report.describe()
+    assert report.accepted and report.drives >= 10, report.describe()
     # the controller drives with that reward (and the fixed barrier) to the goal from starts the
     # demonstrations never used; no cycle budget here (a loaded machine would only skip seeds:
     # bench/lfd_controller/lfd_bench.py measures the cycle time)

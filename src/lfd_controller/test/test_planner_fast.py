@@ -359,3 +359,23 @@ def test_unstall_takes_a_controller_that_wants_to_stand_still_past_the_obstacle(
         moved[unstall] = (state[:2] - [-2.5, 0.0], controller.escapes_)
     assert np.hypot(*moved[0.0][0]) < 0.02 and moved[0.0][1] == 0
     assert moved[1.5][1] == 1 and moved[1.5][0][0] > 0.1 and moved[1.5][0][1] > 0.02, moved
+
+
+def test_unstall_lets_a_robot_wait_for_a_moving_obstacle_to_pass():
+    """Waiting for a moving obstacle is what a person who yields does: a controller that stands
+    still in front of one is not sent on a blind detour across its way (it cut in front of the
+    obstacle, closer than the person ever came)."""
+    from lfd_controller.learning import person_controller, person_driving, person_features
+    from lfd_controller.rewards import LinearReward
+
+    scenario = load_scenario("moving_obstacle")
+    features = person_features()
+    reward = LinearReward([-1.0 if n in ("speed_effort", "turn_effort") else 0.0 for n in features.names],
+                          features)
+    task, model = Task.from_scenario(scenario), scenario.model()
+    controller = person_controller(reward, scenario, budget=None,
+                                   settings=dict(person_driving(0.1), unstall=1.5))
+    state = np.array([-2.5, 0.0, 0.05, 0.0, 0.0])
+    for k in range(30):                           # 3 s at 10 Hz, the obstacle crossing ahead
+        state = model.step(state, controller.act(state, 0.1 * k, task))
+    assert controller.escapes_ == 0 and np.hypot(state[0] + 2.5, state[1]) < 0.02, state

@@ -14,7 +14,7 @@ import yaml
 from threadpoolctl import threadpool_limits
 
 from lfd_controller import plots as plotting
-from lfd_controller.acceptance import Acceptance, calibrate
+from lfd_controller.acceptance import Acceptance, calibrate, goal_reaching
 from lfd_controller.cioc import LinearCIOC
 from lfd_controller.demos import Demonstration, demos_summary, trim_to_goal, windows
 from lfd_controller.errors import LearningError, LfdError, RewardFileError
@@ -112,9 +112,11 @@ def person_controller(reward, scenario, *, budget: Optional[float] = 0.1,
 
 
 # Controller-in-the-loop calibration (acceptance.calibrate): rounds of the controller's own drives
-# from up to max_drives demonstration starts. The check's controller has no cycle budget, so its
-# verdict does not depend on how busy the machine is while learning.
-PERSON_CALIBRATION = {"rounds": 4, "max_drives": 4}
+# from up to max_drives demonstration starts, then the verdict on the best round's drives plus
+# `nearby` starts around each (4 + 8 = 12 drives: one missed drive does not refuse). The check's
+# controller has no cycle budget, so its verdict does not depend on how busy the machine is
+# while learning.
+PERSON_CALIBRATION = {"rounds": 4, "max_drives": 4, "nearby": 2}
 
 
 def fit_person_reward(demos: Sequence[Demonstration], seed: int = 0, *, calibration: Optional[Dict] = None,
@@ -126,8 +128,10 @@ def fit_person_reward(demos: Sequence[Demonstration], seed: int = 0, *, calibrat
     refined (acceptance.calibrate; calibration: its options, default PERSON_CALIBRATION;
     {"rounds": 0}: no check). The report is `learner.acceptance_` (None without a check), the
     controller settings to drive the reward with `learner.driving_` (person_driving),
-    `learner.cioc_reward_` is CIOC's own reward."""
+    `learner.cioc_reward_` is CIOC's own reward. NoGoalError when no demonstration reaches
+    the goal."""
     demos = list(demos)
+    reaching = goal_reaching(demos)
     pieces = [piece for demo in demos
               for piece in windows(trim_to_goal(demo, PERSON_TRIM), PERSON_WINDOW, PERSON_STRIDE)]
     learner = LinearCIOC(person_features(), random_state=seed, signs=PERSON_SIGNS,
@@ -139,7 +143,7 @@ def fit_person_reward(demos: Sequence[Demonstration], seed: int = 0, *, calibrat
         options = dict(PERSON_CALIBRATION, **(calibration or {}))
         if options["rounds"] > 0:
             reward, learner.acceptance_ = calibrate(
-                reward, [d for d in demos if d.meta.get("reached", True)] or demos,
+                reward, reaching,
                 lambda r, scenario, margin: person_controller(r, scenario, budget=None,
                                                               settings=person_driving(margin)),
                 progress=progress, **options)
@@ -148,11 +152,12 @@ def fit_person_reward(demos: Sequence[Demonstration], seed: int = 0, *, calibrat
 
 
 class RewardNotAcceptedError(LearningError):
-    """The learned reward's controller does not drive like the demonstrations (see `acceptance`)."""
+    """The learned reward's controller fails where the person succeeded (see `acceptance`)."""
 
     def __init__(self, acceptance: Acceptance):
-        super().__init__("the learned reward was NOT saved: its controller does not drive like the "
-                         "demonstrations. " + acceptance.describe())
+        super().__init__("the learned reward was NOT saved: its controller fails where the person "
+                         "succeeded (" + "; ".join(acceptance.failure_lines()) + "). "
+                         + acceptance.describe())
         self.acceptance = acceptance
 
 
@@ -198,9 +203,11 @@ def learn_and_save(demos: Sequence[Demonstration], *, kind: str = "linear", outp
     "person" (fit_person_reward: drive it with PERSON_DRIVING, saved with it). Demos are cut
     `trim_steps` after first reaching the goal (None: uncut), so idling after a drive does not
     count as demonstrated behaviour; `store(reward, info)`, when given, also keeps the reward
-    elsewhere. A person reward whose controller does not drive like the demonstrations
-    (acceptance.calibrate) is not saved: RewardNotAcceptedError says what was matched and what
-    not, unless accept_mismatch (then saved with the report in its info)."""
+    elsewhere. A person reward whose controller fails where the person succeeded
+    (acceptance.calibrate: does not reach, collides, crawls, cuts closer to a moving obstacle) is
+    not saved: RewardNotAcceptedError says why, unless accept_mismatch (then saved with the
+    report in its info); one that only drives a little differently is saved with the report and
+    a WARNING line in the summary."""
     demos = list(demos)
     if trim_steps is not None:
         demos = [trim_to_goal(d, trim_steps) for d in demos]
@@ -225,6 +232,8 @@ def learn_and_save(demos: Sequence[Demonstration], *, kind: str = "linear", outp
     if acceptance is not None:
         lines.append(("accepted: " if acceptance.accepted else "saved although NOT accepted "
                       "(--accept-mismatch): ") + acceptance.describe())
+        if acceptance.warning():
+            lines.append(acceptance.warning())
     if kind in ("linear", "person"):
         lines.append("weights: " + json.dumps(reward.to_dict()["weights"]))
     if store is not None:

@@ -25,6 +25,12 @@ ESCAPE_FACTOR = 2.5
 STALL_SPEED = 0.08
 
 
+def _static(task: Task, t: float) -> bool:
+    """The task's obstacle moves slower than STALL_SPEED / 2 (m/s) at episode time t."""
+    ends = np.asarray(task.obstacle_position(np.array([t, t + 1.0])), float).reshape(2, 2)
+    return float(np.hypot(*(ends[1] - ends[0]))) < 0.5 * STALL_SPEED
+
+
 def preferred_speed(reward, v_max: float) -> float:
     """The speed (m/s) at which a linear reward's per-step speed terms peak: the linear pull
     (goal_progress, forward_command) over twice the squared-speed penalty (speed_squared,
@@ -428,7 +434,9 @@ class RecedingHorizonController:
 
     def _unstalled(self, state, t: float, task: Task, command: np.ndarray) -> np.ndarray:
         """With unstall > 0: after `unstall` s standing or creeping (below STALL_SPEED) away from
-        the goal (the plan keeps the robot there: a local optimum in front of the obstacle),
+        the goal in front of a static obstacle (the plan keeps the robot there: a local optimum;
+        waiting for a moving obstacle to pass is what a person who yields does - a blind detour
+        then cuts in front of it),
         follow a detour seed past the obstacle - on the side away from it, or the robot faces -
         for ESCAPE_FACTOR x `unstall` s, then plan again."""
         if self._escape is not None:
@@ -438,7 +446,7 @@ class RecedingHorizonController:
                 return seed[0]
             self._escape, self._still_since = None, None
         far = np.hypot(*(np.asarray(task.goal, float) - state[:2])) > max(self.arrival, 0.25) * 1.5
-        if far and abs(state[3]) < STALL_SPEED and abs(command[0]) < STALL_SPEED:
+        if far and abs(state[3]) < STALL_SPEED and abs(command[0]) < STALL_SPEED and _static(task, t):
             self._still_since = t if self._still_since is None else self._still_since
             if t - self._still_since >= self.unstall:
                 obstacle = np.asarray(task.obstacle_position(np.array(t)), float).reshape(2)

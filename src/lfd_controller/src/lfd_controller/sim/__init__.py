@@ -10,6 +10,7 @@ from lfd_controller.sim.families import (
     SamplingMPCDriver,
     SocialForceDriver,
     TangentSwerveDriver,
+    YieldingDriver,
     make_person,
 )
 from lfd_controller.sim.person import (
@@ -23,4 +24,4 @@ from lfd_controller.sim.person import (
 
 __all__ = ["FAMILIES", "PERSON_MAPPING", "Person", "SimulatedPerson", "draw_person", "drive_figures",
            "quantise", "make_person", "TangentSwerveDriver", "PotentialFieldDriver", "PursuitVODriver",
-           "SocialForceDriver", "SamplingMPCDriver", "person_demos", "dart_demos", "unseen_layouts"]
+           "SocialForceDriver", "SamplingMPCDriver", "YieldingDriver", "person_demos", "dart_demos", "unseen_layouts"]

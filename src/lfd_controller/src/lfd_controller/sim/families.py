@@ -1,4 +1,4 @@
-"""Demonstrator families: five structurally different ways a person could drive (no ROS).
+"""Demonstrator families: six structurally different ways a person could drive (no ROS).
 
 Each family is its own policy (what the person wants from what they see); the hand, the stick,
 the reaction delay and the per-person variation are shared (sim.person). None of them optimises
@@ -14,7 +14,11 @@ the learner's features:
     goal plus an anisotropic exponential push away from the obstacle; the robot follows it;
   * `SamplingMPCDriver` - a sampling planner with its own cost: constant-arc rollouts of a plain
     kinematic model, scored on the distance left to the goal, a clearance hinge and the person's
-    speed; the best arc's first command.
+    speed; the best arc's first command;
+  * `YieldingDriver` - waits for the way to clear: a velocity-obstacle test of headings near the
+    goal's from a delayed estimate of the obstacle (where it was 0.2-0.5 s ago, moving as it did
+    then); a moving obstacle in the way is let pass (stop and wait, backing off only when it
+    would hit the person standing), a static one is driven round.
 
 `FAMILIES` maps each family's name to its class; `make_person(family, seed)` draws a person.
 """
@@ -259,9 +263,69 @@ class SamplingMPCDriver(SimulatedPerson):
         return float(v[best]), float(w[best])
 
 
+class YieldingDriver(SimulatedPerson):
+    """Yields to a moving obstacle: drives at the goal along the admissible heading within
+    `detour` of it (velocity-obstacle test over a 2-4 s horizon with the person's clearance plus
+    a little more, from a delayed estimate - the obstacle where it was `estimate_delay` s ago,
+    moving as it did then); when a moving obstacle blocks every such heading the person stops
+    and waits facing the goal until the way is clear (or, when standing would be hit, steps
+    away from it). A static obstacle (judged slower than 0.05 m/s) is driven round."""
+
+    family = "yield_vo"
+    OFFSETS = np.radians(np.arange(-90, 91, 10))
+
+    def start_drive(self):
+        rng = self.rng
+        self.horizon = rng.uniform(2.0, 4.0)
+        self.estimate_delay = rng.uniform(0.2, 0.5)
+        self.detour = math.radians(rng.uniform(20.0, 40.0))
+        self.spare = rng.uniform(0.05, 0.15)
+        self.lookahead = rng.uniform(0.5, 1.0)
+
+    def clear(self, position, velocity_obs, obstacle, velocities):
+        """Which of the robot velocities (n, 2) keep out of the person's room (plus spare)
+        within the horizon, the obstacle moving at velocity_obs from `obstacle`."""
+        relative = velocities - velocity_obs
+        offset = obstacle - position
+        rel2 = np.maximum(np.sum(relative ** 2, axis=1), 1e-9)
+        when = np.clip(relative @ offset / rel2, 0.0, self.horizon)
+        closest = np.hypot(*(offset[None, :] - when[:, None] * relative).T)
+        return closest > min(self.keep() + self.spare, float(np.hypot(*offset)) - 0.01)
+
+    def intent(self, state, t):
+        position, yaw = state[:2], state[2]
+        to_goal = self.target(state) - position
+        goal_bearing = math.atan2(to_goal[1], to_goal[0])
+        seen = t - self.estimate_delay                  # the delayed estimate
+        obstacle, velocity_obs = self.obstacle_seen(seen), self.obstacle_velocity(seen)
+        moving = float(np.hypot(*velocity_obs)) > 0.05
+        offsets = self.OFFSETS[np.abs(self.OFFSETS) <= self.detour] if moving else self.OFFSETS
+        headings = goal_bearing + offsets
+        cost = np.abs(offsets) - 0.05 * self.person.side * np.sign(offsets)
+        speed = self.goal_speed(state, self.today.speed)
+        unit = np.stack([np.cos(headings), np.sin(headings)], axis=1)
+        ok = self.clear(position, velocity_obs, obstacle, speed * unit)
+        if np.any(ok):
+            heading = float(headings[np.flatnonzero(ok)[np.argmin(cost[ok])]])
+        elif not moving or self.clear(position, velocity_obs, obstacle, np.zeros((1, 2)))[0]:
+            heading, speed = goal_bearing, 0.0          # wait for the way to clear
+        else:                                           # it would hit me standing: step aside
+            away = position - obstacle
+            side = -velocity_obs if float(np.hypot(*away)) < 1e-9 else away
+            heading = math.atan2(side[1], side[0])
+        alpha = wrap(heading - yaw)
+        forward = speed * max(0.0, math.cos(alpha)) ** 2
+        turn = self.today.turn_gain * alpha
+        if speed > 0:
+            turn = 2.0 * max(forward, 0.15) * math.sin(alpha) / self.lookahead
+            if abs(alpha) > math.pi / 2:
+                turn = math.copysign(self.today.turn_gain, alpha)
+        return forward, turn
+
+
 FAMILIES: Dict[str, Type[SimulatedPerson]] = {
     cls.family: cls for cls in (TangentSwerveDriver, PotentialFieldDriver, PursuitVODriver,
-                                SocialForceDriver, SamplingMPCDriver)}
+                                SocialForceDriver, SamplingMPCDriver, YieldingDriver)}
 
 
 def make_person(family: str, random_state=None, person=None, **kwargs) -> SimulatedPerson:
