@@ -1,3 +1,49 @@
 # The shared test harness (real roscore, roslaunch, database servers, Xvfb) for every test in the
 # workspace: see src/ros_harness/src/ros_harness/pytest_plugin.py.
+import os
+import resource
+from collections import defaultdict
+
 pytest_plugins = ["ros_harness.pytest_plugin"]
+
+CPU_REPORT_FILES = 25
+_last_cpu = [None]
+_cpu_by_file = defaultdict(float)
+
+
+def _cpu_seconds() -> float:
+    """user+sys of this process and of its children that have ended (roslaunch, servers, ...)."""
+    total = 0.0
+    for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN):
+        usage = resource.getrusage(who)
+        total += usage.ru_utime + usage.ru_stime
+    return total
+
+
+def pytest_collection_finish(session):
+    _last_cpu[0] = _cpu_seconds()   # collection (imports) is not any test file's
+
+
+def pytest_runtest_makereport(item, call):
+    # The CPU since the previous report of this process: setup, call and teardown in turn, so a
+    # module fixture's cost lands on the test that set it up or tore it down.
+    now = _cpu_seconds()
+    spent = 0.0 if _last_cpu[0] is None else now - _last_cpu[0]
+    _last_cpu[0] = now
+    item.user_properties.append(("cpu_seconds", spent))
+
+
+def pytest_runtest_logreport(report):
+    for key, value in getattr(report, "user_properties", ()):
+        if key == "cpu_seconds":
+            _cpu_by_file[report.nodeid.split("::")[0]] += value
+
+
+def pytest_terminal_summary(terminalreporter):
+    if not _cpu_by_file or os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    total = sum(_cpu_by_file.values())
+    terminalreporter.write_sep("=", f"CPU per test file (user+sys with its processes; all files "
+                                    f"{total / 60:.1f} CPU-min)")
+    for path, seconds in sorted(_cpu_by_file.items(), key=lambda kv: -kv[1])[:CPU_REPORT_FILES]:
+        terminalreporter.write_line(f"{seconds:8.1f} s  {path}")

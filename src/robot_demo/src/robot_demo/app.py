@@ -108,11 +108,16 @@ def main(argv: Optional[List[str]] = None) -> int:
         f"data in {db_server.data_dir})")
     demo = Demo(core, db_server, args.output)
     rospy.init_node("demo", anonymous=True, disable_signals=True)
-    failed = []
+    chapters_start = time.monotonic()
+    failed, times = [], {}
     try:
         for name in args.only or CHAPTERS:
+            chapter_start = time.monotonic()
             if not _run_chapter(name, demo):
                 failed.append(name)
+            times[name] = time.monotonic() - chapter_start
+        say("\nchapter times: " + ", ".join(f"{name} {seconds:.0f} s" for name, seconds in times.items())
+            + f" (setting up roscore and the database: {chapters_start - started:.0f} s)")
         if args.keep_running:
             keep_running(demo, args.rviz)
     finally:
@@ -136,7 +141,7 @@ def _run_chapter(name: str, demo: Demo) -> bool:
     except Exception as err:  # noqa: BLE001 - report the chapter, go on with the others
         succeeded = False
         say(f"FAILED: {name}: {type(err).__name__}: {err}")
-    say(f"({time.monotonic() - chapter_start:.1f} s)")
+    say(f"({name}: {time.monotonic() - chapter_start:.1f} s)")
     return succeeded
 
 

@@ -1,6 +1,8 @@
 """Crowd map (traffic_gp): a GP of people counts over the halls and the day, served as a cost map.
 
-Loads the demo's crowd model (or trains one on simulated robots, about a minute, once), starts
+Loads the demo's crowd model (or trains a small, quick one on simulated robots once: no hold-out
+days, so no settings chosen, no baselines compared and no intervals calibrated, as the node's full
+model does; about a minute on 2 cores), starts
 the simulated robots and the crowd model server (which loads the model without retraining and
 keeps learning online), then compares its answers with the simulator's truth and checks the
 crowd cost map a costmap_2d static layer would read.
@@ -10,6 +12,8 @@ import sys
 import time
 
 import numpy as np
+
+from robot_demo import waits
 
 TITLE = "Crowd map: when and where people are in the halls (traffic_gp)"
 NODE = "/traffic_gp"
@@ -30,12 +34,16 @@ def model_file(demo):
         return path
     except ModelFormatError:
         pass
-    print("  model: none yet; training one on 6000 simulated robot views (once) ...", flush=True)
+    print("  model: none yet; training a small, quick demo model on 3000 simulated robot views "
+          "(once; the node's default is the full model with its settings chosen on hold-out "
+          "days) ...", flush=True)
     start = time.monotonic()
     command = [sys.executable, "-m", "traffic_gp.sim.cli", "train", "--map", "generated:0",
-               "--views", "6000", "--weeks", "2", "--steps", "300", "--inducing", "300",
+               "--views", "3000", "--weeks", "2", "--steps", "200", "--inducing", "150", "--quick",
                "--out", str(path), "--report", str(demo.output / "crowd")]
-    result = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    limit = waits.bound(600)
+    print(f"    (training bounded at {limit:.0f} s)", flush=True)
+    result = subprocess.run(command, capture_output=True, text=True, timeout=limit)
     if result.returncode != 0:
         raise RuntimeError(f"training failed: {result.stderr.strip().splitlines()[-1:]}")
     print("\n".join("    " + line for line in result.stdout.strip().splitlines()[-8:]))
@@ -59,7 +67,7 @@ def run(demo) -> None:
     launch = demo.launch(demo.workspace_launch("crowd_sim.launch"), seed=SEED, with_map=not have_map,
                          model_path=str(path), time_scale=60, start_hour=WED + 10.75,
                          publish_period=2.0)
-    launch.wait_for_services([f"{NODE}/predict_count", f"{NODE}/predict_region"], timeout=90)
+    waits.services(launch, [f"{NODE}/predict_count", f"{NODE}/predict_region"], 180)
     count = rospy.ServiceProxy(f"{NODE}/predict_count", PredictCount)
     region = rospy.ServiceProxy(f"{NODE}/predict_region", PredictRegion)
     # the truth of the simulated robots: the people simulator as people_sim.launch configures it
@@ -88,8 +96,8 @@ def run(demo) -> None:
         truth = sim.expected_count(hours, inside).sum()
         print(f"  whole main hall at {label}: model {answer.expected_count:.1f} people "
               f"[{answer.lower:.1f}, {answer.upper:.1f}] in {answer.cells} cells, truth {truth:.1f}")
-    grid = rospy.wait_for_message("/map", OccupancyGrid, 30)
-    crowd = rospy.wait_for_message(f"{NODE}/crowd_costmap", OccupancyGrid, 30)
+    grid = waits.message("/map", OccupancyGrid, 60)
+    crowd = waits.message(f"{NODE}/crowd_costmap", OccupancyGrid, 120)
     values, walls = np.asarray(crowd.data), np.asarray(grid.data) == 100
     print(f"  /traffic_gp/crowd_costmap: {crowd.info.width}x{crowd.info.height} at "
           f"{crowd.info.resolution:.2f} m (same as /map: "
@@ -97,12 +105,10 @@ def run(demo) -> None:
           f"costs {values[~walls].min()}..{values[~walls].max()} on free cells, walls "
           f"{'all -1' if np.all(values[walls] == -1) else 'NOT -1'} "
           "(max over now + 30 min, for a static layer with use_maximum)")
-    from ros_harness import wait_until
-
     def model_rows(message: str) -> int:            # "ok: model of N rows, S steps; ..."
         return int(message.split("model of ")[1].split()[0])
 
     first = count(10.0, 6.5, rospy.Time(0)).message
-    later = wait_until(lambda: (lambda m: m if model_rows(m) > model_rows(first) else None)(
-        count(10.0, 6.5, rospy.Time(0)).message), 90, what="the model to take in new counts")
+    later = waits.wait_until(lambda: (lambda m: m if model_rows(m) > model_rows(first) else None)(
+        count(10.0, 6.5, rospy.Time(0)).message), 180, "the model to take in new counts")
     print(f"  online learning from the simulated robots: '{first}' -> '{later}'")

@@ -6,7 +6,7 @@ import time
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray
 
-from ros_harness import wait_until
+from robot_demo.waits import wait_until
 from ros_mongo import open_store, parse_query
 from ros_mongo.bagio import export_bag
 
@@ -63,7 +63,7 @@ def _record(demo, session, counts) -> None:
     recorder = demo.launch("ros_mongo", "ros_mongo_server.launch", db_url=demo.db_url, session_id=session,
                            robot_id="sim_robot", include="[^/map$]",
                            spool_path=str(demo.output / "ros_mongo_server.spool"))
-    wait_until(lambda: counts.stored() > 0, 30, what="the recorder's first stored messages",
+    wait_until(lambda: counts.stored() > 0, 60, what="the recorder's first stored messages",
                check=recorder.process.check_alive)
     print(f"  ros_mongo_server recording into {demo.db_url} (session {session}) ...")
     time.sleep(RECORD_SECONDS)  # the recording window itself
@@ -117,7 +117,7 @@ def _replay(demo, session, counts, stored) -> None:
     expected = {t + "_mongo": n for t, n in stored.items() if t + "_mongo" in counts.arrived}
     started = time.monotonic()
     demo.launch("ros_mongo", "ros_mongo_retrieve.launch", db_url=demo.db_url, query=query, rate=2.0)
-    wait_until(lambda: all(counts.arrived[t] >= n for t, n in expected.items()), 60,
+    wait_until(lambda: all(counts.arrived[t] >= n for t, n in expected.items()), 120,
                what="the replayed messages")
     print(f"  ros_mongo_retriever replayed the session at rate 2.0 in {time.monotonic() - started:.1f} s "
           f"(incl. start-up): " + ", ".join(f"{t} {counts.arrived[t]}/{n}" for t, n in expected.items()))

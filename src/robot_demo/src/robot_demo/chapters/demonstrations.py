@@ -14,6 +14,7 @@ from std_msgs.msg import Bool, String
 from std_srvs.srv import Trigger
 
 from robot_common.ros_node import odom_state
+from robot_demo import waits
 
 TITLE = "Learning from demonstration: a person's joystick demos -> reward -> controller (lfd_controller)"
 DEMOS, DRIVES = 6, 2
@@ -69,9 +70,9 @@ def press(joy, button, axes=None):
 
 
 def wait(condition, timeout, what):
-    from ros_harness import wait_until
+    from robot_demo.waits import wait_until
 
-    return wait_until(condition, timeout, what=what)
+    return wait_until(condition, timeout, what)
 
 
 def new_episode(watch, reset):
@@ -80,7 +81,7 @@ def new_episode(watch, reset):
         watch.time = None
     episode = reset().message.split()[1] + " "
     wait(lambda: watch.status.startswith(episode) and watch.time is not None and watch.time < 1.0,
-         10, "the new episode")
+         30, "the new episode")
 
 
 def record_demos(scenario, joy, watch, reset):
@@ -106,14 +107,14 @@ def record_demos(scenario, joy, watch, reset):
         start = watch.state.copy()
         driver.reset(scenario)
         press(joy, A)
-        wait(lambda: watch.recording, 10, "recording to start")
+        wait(lambda: watch.recording, 30, "recording to start")
         drive.update(active=True, sitting=0)
         wait(lambda: drive["sitting"] >= SITTING or watch.status.split()[1] == "collided"
-             or (watch.time or 0.0) > scenario.max_time, 60, "the demonstration drive")
+             or (watch.time or 0.0) > scenario.max_time, 120, "the demonstration drive")
         drive["active"] = False
         joy.publish(Joy(axes=[0.0] * 8, buttons=[0] * 11))      # let go of the stick
         press(joy, B)
-        wait(lambda: not watch.recording, 10, "recording to stop")
+        wait(lambda: not watch.recording, 30, "recording to stop")
         print(f"  demo {k + 1}: from ({start[0]:.2f}, {start[1]:.2f}), status {watch.status.split()[1]}",
               flush=True)
     watch.on_step = None
@@ -124,8 +125,8 @@ def drive(demo, scenario, watch, reset, reward_file):
 
     controller = demo.launch("lfd_controller", "controller.launch", reward_file=str(reward_file),
                              scenario="static_obstacle", seed=9, time_scale=2.0, **FRAMES)
-    controller.wait_for_topics([NS + "/reward_controller/cycle_time"], timeout=60)
-    controller.wait_for_services([NS + "/unicycle_sim/reset"], timeout=60)     # the new simulator
+    waits.topics(controller, [NS + "/reward_controller/cycle_time"], 120)
+    waits.services(controller, [NS + "/unicycle_sim/reset"], 120)     # the new simulator
     cycles = []
     sub = rospy.Subscriber(NS + "/reward_controller/cycle_time", rospy.AnyMsg,
                            lambda m: cycles.append(time.monotonic()), queue_size=50)
@@ -134,7 +135,7 @@ def drive(demo, scenario, watch, reset, reward_file):
         with watch.lock:
             watch.trace = []
         new_episode(watch, reset)
-        wait(lambda: watch.status.split()[1] in ("reached", "collided"), 60, "the goal or a collision")
+        wait(lambda: watch.status.split()[1] in ("reached", "collided"), 120, "the goal or a collision")
         with watch.lock:
             states = np.array(watch.trace)
         reached = watch.status.endswith("reached")
@@ -166,12 +167,12 @@ def run(demo) -> None:
                          source=f"person:{FAMILY}", session_id=session,
                          scale_linear=PERSON_MAPPING.scale_linear,
                          scale_angular=PERSON_MAPPING.scale_angular, **FRAMES)
-    launch.wait_for_services([NS + "/demo_recorder/start", NS + "/unicycle_sim/reset"], timeout=60)
-    launch.wait_for_subscribers([NS + "/joy"], timeout=30)
+    waits.services(launch, [NS + "/demo_recorder/start", NS + "/unicycle_sim/reset"], 120)
+    waits.subscribers(launch, [NS + "/joy"], 60)
     joy = rospy.Publisher(NS + "/joy", Joy, queue_size=20)
     reset = rospy.ServiceProxy(NS + "/unicycle_sim/reset", Trigger)
     watch = Watch()
-    wait(lambda: joy.get_num_connections() > 0 and watch.state is not None, 20, "teleop and simulator")
+    wait(lambda: joy.get_num_connections() > 0 and watch.state is not None, 60, "teleop and simulator")
     print(f"  recording {DEMOS} person-like demonstrations through Joy -> joy_teleop -> "
           f"unicycle_sim -> demo_recorder (bags + CouchDB)", flush=True)
     record_demos(scenario, joy, watch, reset)

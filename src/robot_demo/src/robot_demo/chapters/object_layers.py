@@ -20,9 +20,11 @@ from igmm_layers.srv import (
     SaveClusters,
 )
 from robot_common.maps import OCCUPIED
+from robot_demo import waits
+from robot_demo.waits import wait_until
 from robot_sim.detections import building_detections
 from robot_sim.params import ObjectDetectionSimParams
-from ros_harness import master_graph, wait_until
+from ros_harness import master_graph
 
 TITLE = "Object layers: where things are, learnt from noisy detections (igmm_layers)"
 SEED, RANDOM_SEED = 0, 1
@@ -43,10 +45,10 @@ def run(demo) -> None:
     has_map = any(topic == "/map" for topic, _ in master_graph(demo.core.uri).getPublishedTopics("/"))
     launch = demo.launch(demo.workspace_launch("object_layers_sim.launch"), seed=SEED,
                          random_seed=RANDOM_SEED, db_url=demo.db_url, with_map=not has_map)
-    launch.wait_for_services(["/igmm_layers/layer_info", "/igmm_layers/load_clusters"], timeout=60)
+    waits.services(launch, ["/igmm_layers/layer_info", "/igmm_layers/load_clusters"], 120)
     info = service("layer_info", LayerInfo)
     settled = wait_until(lambda: (lambda i: i if i.received >= expected and
-                                  i.received == i.applied + i.dropped else None)(info()), 90,
+                                  i.received == i.applied + i.dropped else None)(info()), 180,
                          what="the layer server to take in every simulated detection")
     print(f"  simulated: {len(building.objects)} objects of {len({o.class_name for o in building.objects})} "
           f"classes, {len(dets)} detections ({np.sum(dets.truth < 0)} clutter, noise {config.noise_std} m, "
@@ -128,7 +130,7 @@ def persist() -> None:
     wipe.header.stamp = rospy.Time.now()
     forget.publish(wipe)
     locate = service("locate_objects", LocateObjects)
-    wait_until(lambda: not locate(class_name="any", region_id="", layer="").clusters, 20,
+    wait_until(lambda: not locate(class_name="any", region_id="", layer="").clusters, 60,
                what="the layers to be forgotten")
     forget.unregister()
     loaded = service("load_clusters", LoadClusters)(timestamp="")

@@ -3,6 +3,7 @@ import time
 
 import rospy
 
+from robot_demo import waits
 from robot_sim.building import generate_building
 
 TITLE = "Where is ...? Phrases to labelled regions (embedding_server + region_recommender)"
@@ -22,20 +23,13 @@ def run(demo) -> None:
           "backend: the shipped default (pretrained sentence model all-MiniLM-L6-v2, CPU)")
     start = time.monotonic()
     launch = demo.launch("region_search", "region_search.launch", labels_path=str(labels))
-    launch.wait_for_services(["/embedding_server/embed", "/embedding_server/similarity",
-                              "/region_recommender/recommend"], timeout=300)
+    waits.services(launch, ["/embedding_server/embed", "/embedding_server/similarity",
+                            "/region_recommender/recommend"], 300)
     # The services are advertised at once; the model is ready when ~active_backend is set (the
-    # word2vec fallback trains for minutes on a machine that never trained it: say so).
+    # word2vec fallback trains for minutes on a machine that never trained it: the bound allows it).
     embed = rospy.ServiceProxy("/embedding_server/embed", Embed)
-    said = ""
-    while not rospy.has_param("/embedding_server/active_backend"):
-        if time.monotonic() - start > 3600:
-            raise RuntimeError("the embedding model was not ready after an hour")
-        probe = embed(phrases=["robot"])
-        if not probe.success and probe.message != said and time.monotonic() - start > 15:
-            said = probe.message
-            print(f"  {probe.message}")
-        rospy.sleep(5.0 if said else 0.2)
+    waits.wait_until(lambda: rospy.has_param("/embedding_server/active_backend"), 900,
+                     "the embedding model to be ready", interval=0.2)
     probe = embed(phrases=["robot"])
     print(f"  nodes ready in {time.monotonic() - start:.1f} s; backend {probe.backend}: "
           f"{probe.model}")

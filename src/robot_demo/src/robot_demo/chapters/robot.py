@@ -6,6 +6,8 @@ import rospy
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Image, JointState, LaserScan
 
+from robot_demo import waits
+
 TITLE = "A simulated robot in a generated building (robot_sim)"
 TOPICS = {"/odom": Odometry, "/scan": LaserScan, "/camera/rgb/image_raw": Image,
           "/joint_states": JointState}
@@ -14,7 +16,7 @@ TOPICS = {"/odom": Odometry, "/scan": LaserScan, "/camera/rgb/image_raw": Image,
 def run(demo) -> None:
     sim = demo.launch("robot_sim", "sim.launch", seed=0,
                       labels_path=str(demo.output / "building_labels.json"))
-    sim.wait_for_topics(list(TOPICS) + ["/map"], timeout=60)
+    waits.topics(sim, list(TOPICS) + ["/map"], 120)
     counts = {topic: 0 for topic in TOPICS}
     lock = threading.Lock()
 

@@ -38,6 +38,9 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
     train.add_argument("--weekly", action="store_true",
                        help="model the week, not one day (default: chosen on the last days)")
     train.add_argument("--seed", type=int, default=1)
+    train.add_argument("--quick", action="store_true",
+                       help="no hold-out days: the default settings fitted on all rows, without "
+                            "the baselines' comparison or interval calibration (a demo's minute)")
     train.add_argument("--out", type=Path, required=True)
     train.add_argument("--report", type=Path, help="also write plots here")
     report = sub.add_parser("report", help="plots of a saved model against the simulator's truth")
@@ -59,6 +62,7 @@ def train(args) -> dict:
           f"{time.perf_counter() - start:.1f} s", flush=True)
     model = TrafficGP(n_inducing=args.inducing, n_steps=args.steps,
                       weekly=True if args.weekly else "auto", random_state=args.seed,
+                      validation_fraction=0.0 if args.quick else 0.2,
                       progress=True).fit(rows, cells=sim.cells)
     meta = {"map": args.map, "cell_size": args.cell_size, "views": len(views), "seed": args.seed}
     model.save(args.out, meta=meta)
