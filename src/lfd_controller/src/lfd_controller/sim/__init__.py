@@ -24,4 +24,5 @@ from lfd_controller.sim.person import (
 
 __all__ = ["FAMILIES", "PERSON_MAPPING", "Person", "SimulatedPerson", "draw_person", "drive_figures",
            "quantise", "make_person", "TangentSwerveDriver", "PotentialFieldDriver", "PursuitVODriver",
-           "SocialForceDriver", "SamplingMPCDriver", "YieldingDriver", "person_demos", "dart_demos", "unseen_layouts"]
+           "SocialForceDriver", "SamplingMPCDriver", "YieldingDriver", "person_demos", "dart_demos",
+           "unseen_layouts"]
