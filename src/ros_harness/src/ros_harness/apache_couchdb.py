@@ -227,9 +227,14 @@ class ApacheCouchDB(_CouchCopy):
             self.ports = [base]
             self.epmd_port = _free_base((0,))
         env = dict(self._env(), COUCHDB_ADMIN_HASH=admin_hash(self.admin[1]))
-        # the password is given as a hash (environment): never on a command line
-        self._script(NODE_SCRIPT, ["start", str(self.dir), str(self.port), self.admin[0], "hashed"], env=env)
-        self._add_member_account()
+        try:
+            # the password is given as a hash (environment): never on a command line
+            self._script(NODE_SCRIPT, ["start", str(self.dir), str(self.port), self.admin[0], "hashed"],
+                         env=env)
+            self._add_member_account()
+        except BaseException:
+            self.stop()  # a node that came up must not outlive a failed start
+            raise
         return self
 
     @property
@@ -261,11 +266,15 @@ class CouchDBCluster(_CouchCopy):
             base = _free_base((0, 1, 2, 1000, 1001, 1002))
             self.ports = [base + i for i in range(self.NODES)]
             self.epmd_port = _free_base((0,))
-        # The cluster script takes the admin password as an argument (a throw-away test password).
-        self._script(CLUSTER_SCRIPT, ["start", str(self.dir), str(self.port), *self.admin],
-                     secret=self.admin[1])
-        wait_until(self._whole, START_TIMEOUT, what="all three CouchDB nodes to answer /_up")
-        self._add_member_account()
+        try:
+            # The cluster script takes the admin password as an argument (a throw-away test password).
+            self._script(CLUSTER_SCRIPT, ["start", str(self.dir), str(self.port), *self.admin],
+                         secret=self.admin[1])
+            wait_until(self._whole, START_TIMEOUT, what="all three CouchDB nodes to answer /_up")
+            self._add_member_account()
+        except BaseException:
+            self.stop()  # nodes that came up must not outlive a failed start
+            raise
         return self
 
     def _whole(self) -> bool:

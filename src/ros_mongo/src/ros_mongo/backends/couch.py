@@ -27,7 +27,8 @@ prefix. TLS: `tls_ca_file` (a private CA bundle), `tls_cert_file` + `tls_key_fil
 certificate), `tls_verify=False` only for testing.
 
 Answers (see ros_mongo.errors): connection errors, timeouts, a truncated or non-JSON body, 429,
-5xx (500 `timeout` included) -> StoreUnavailable; 401, 403, 500 `error_saving_ddoc` forbidden, a
+5xx (500 `timeout` included) -> StoreUnavailable (a `_bulk_docs` answer may take `timeout` plus
+one second per 500 KB of its body); 401, 403, 500 `error_saving_ddoc` forbidden, a
 missing database the account may not create -> StoreRefused; 413 (`document_too_large` names the
 document) and 400 on `_bulk_docs` -> BatchTooLarge; 202 on `_bulk_docs` (no write quorum) ->
 the documents are looked up, and StoreUnavailable unless every one is there.
@@ -69,6 +70,11 @@ _INDEXES = {"ros_mongo_topic_time": ["topic", "receive_time"], "ros_mongo_time":
 _DB_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789_$()+-/")
 _MIN_WINDOW = 1e-3   # seconds: the windowed reader's smallest time window
 _READ_RETRIES = 4    # a read answered "retry later" is tried this many times (backoff 0.5, 1, 2 s)
+# Bytes per second a busy server is given to store a `_bulk_docs` body before its answer is
+# overdue: a 3-node cluster on a loaded machine took 14 s for 9 MB; with the bare `timeout`,
+# ten robots draining their spools at once each gave up before the answer came, and sent the
+# same batch again, for minutes.
+_LOADED_SERVER_RATE = 500_000
 
 
 @register_backend("http", "https")
@@ -116,7 +122,8 @@ class CouchStore(MessageStore):
         url = self.db_url + path
         try:
             # verify given per request: requests lets REQUESTS_CA_BUNDLE override the session's
-            response = self.session.request(method, url, timeout=self.timeout, verify=self.session.verify,
+            timeout = kwargs.pop("timeout", self.timeout)
+            response = self.session.request(method, url, timeout=timeout, verify=self.session.verify,
                                             **kwargs)
         except requests.exceptions.SSLError as err:  # (a ConnectionError subclass: first)
             raise StoreRefused(f"TLS with CouchDB at {self.url} failed (check tls_ca_file / "
@@ -293,9 +300,12 @@ class CouchStore(MessageStore):
                 pieces.append(b",")
             pieces.extend(parts)
         pieces.append(b"]}")
+        data = b"".join(pieces)
         try:
-            return self._request("POST", "/_bulk_docs", data=b"".join(pieces),
-                                 headers={"Content-Type": "application/json"})
+            # the server answers once it has stored every document: its time grows with the body
+            return self._request("POST", "/_bulk_docs", data=data,
+                                 headers={"Content-Type": "application/json"},
+                                 timeout=(self.timeout, self.timeout + len(data) / _LOADED_SERVER_RATE))
         except StoreError as err:
             if type(err) is StoreError and "answered 400" in str(err):  # the batch is malformed
                 raise BatchTooLarge(str(err)) from None
