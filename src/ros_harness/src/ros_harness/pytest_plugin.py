@@ -12,8 +12,8 @@ Fixtures (all tear down what they started, by process id):
   `db_url` (function, parametrised): the same test against both backends.
 - `own_couchdb_server`, `own_mongodb_server`, `own_db_server` (function; the last parametrised):
   a private server that the test may stop and restart (outage tests).
-- `apache_couchdb` (session): a real Apache CouchDB 3 node from ../shared/couchdb (skipped with the
-  reason where that folder is absent); `apache_couchdb_url` (function): a fresh database on it,
+- `apache_couchdb` (session): a real Apache CouchDB 3 node from ../shared/couchdb or
+  $SHARED_COUCHDB_DIR (skipped with the reason where that folder is absent); `apache_couchdb_url` (function): a fresh database on it,
   created by the admin, as the URL of its *member* account;
   `couch_server` (parametrised "pouchdb", "apache"): the shared server of each kind (both have
   `.url` for the test's own requests and `.database_url(name)` for the product);
