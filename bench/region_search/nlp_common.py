@@ -157,15 +157,18 @@ def percentile(values: Sequence[float], q: float) -> float:
 def fresh_process_load_seconds(**config) -> dict:
     """Load an embedding backend (region_search.backends.EmbeddingServerParams(**config)) in a
     new Python process, imports included, and embed one phrase: what a node's start-up costs.
-    Returns {"seconds": total, "load_seconds": the loader's own time, "backend": served, "note"}."""
+    Returns {"seconds": total, "load_seconds": the loader's own time, "cpu_seconds" (user +
+    sys), "max_rss_mb" (peak resident memory), "backend": served, "note"}."""
     import subprocess
     import sys
 
-    code = ("import json, sys, time; t = time.monotonic();"
+    code = ("import json, resource, sys, time; t = time.monotonic();"
             "from region_search.backends import EmbeddingServerParams, load_backend;"
             "b = load_backend(EmbeddingServerParams(**json.loads(sys.argv[1])));"
             "b.embeddings.embed_phrases(['water fountain']);"
+            "u = resource.getrusage(resource.RUSAGE_SELF);"
             "print(json.dumps({'seconds': time.monotonic() - t, 'load_seconds': b.load_seconds,"
+            " 'cpu_seconds': u.ru_utime + u.ru_stime, 'max_rss_mb': u.ru_maxrss / 1024.0,"
             " 'backend': b.backend, 'note': b.note}))")
     out = subprocess.run([sys.executable, "-c", code, json.dumps(config)], capture_output=True,
                          text=True)

@@ -6,8 +6,13 @@ description offset, the no-match threshold) and scoring them on another.
   phrase set, but a room number that matches is decisive); phrases that match no place are not
   used here.
 - `choose_threshold`: the no-match margin (the best label's score less the mean score of all
-  labels) that answers most training phrases right (a phrase with a place: top-1 right and its
-  margin at least the threshold; a phrase without: below it), the middle of the best interval.
+  labels): a low quantile of the margins of the training phrases that have a place, the largest
+  quantile whose threshold, chosen on all training buildings but one, wrongly refuses at most
+  FALSE_NO_MATCH_BUDGET of the phrases with a place of the building left out, for every
+  building left out in turn (inner leave-one-building-out). A refusal of a phrase that has a
+  place costs more than a best guess for one that has none (which comes with a low confidence).
+- `fit_confidence`: the answer's confidence, a logistic regression of "the first label is a
+  right answer" on the best label's lead over the mean and its gap to the second.
 - `choose_sources`: whether to use WordNet's definitions and compounds (OPTIONAL_SOURCES), by an
   inner leave-one-building-out on the training buildings.
 - `choose_offset`: the description offset (from a fixed grid, ties: the larger, the safer) that
@@ -21,13 +26,18 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 from scipy.optimize import minimize
 
-from region_search.ranking import FEATURES, RankingWeights
+from region_search.ranking import FEATURES, RankingWeights, lead_and_gap
 
 NUMBER_FEATURES = [FEATURES.index("number_match"), FEATURES.index("number_mismatch")]
 # Knowledge sources whose use is itself a setting (chosen like the weights).
-OPTIONAL_SOURCES = ("knowledge", "compounds")
+OPTIONAL_SOURCES = ("knowledge", "compounds", "query_words")
 OFFSETS = (0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 3.0, 5.0)
 L2 = 0.01
+# The no-match answer: wrong refusals allowed on any held-out building, and the quantiles of
+# answerable margins tried.
+FALSE_NO_MATCH_BUDGET = 0.05
+QUANTILES = (0.0, 0.005, 0.01, 0.02, 0.03, 0.04, 0.05, 0.07, 0.1)
+SURE_CONFIDENCE = 0.5  # "sure" = more likely right than not (fixed, not chosen on data)
 
 
 @dataclass
@@ -50,53 +60,104 @@ def scores(item: Scored, weights: RankingWeights, descriptions: bool) -> np.ndar
     return own
 
 
+def _stacked(items: Sequence[Scored]) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The phrases with a place as padded arrays: evidence (phrases, labels, features), which
+    labels exist, which are expected."""
+    usable = [i for i in items if i.expected]
+    width = max(len(i.own) for i in usable)
+    x = np.zeros((len(usable), width, len(FEATURES)))
+    exists = np.zeros((len(usable), width), dtype=bool)
+    right = np.zeros((len(usable), width), dtype=bool)
+    for k, item in enumerate(usable):
+        x[k, :len(item.own)] = item.own
+        exists[k, :len(item.own)] = True
+        right[k, item.expected] = True
+    return x, exists, right
+
+
 def fit_weights(items: Sequence[Scored], l2: float = L2) -> Dict[str, float]:
     """Evidence weights by L2-penalised conditional logit on the phrases that have a place."""
-    usable = [(i.own, i.expected) for i in items if i.expected]
+    x, exists, right = _stacked(items)
     penalty = np.ones(len(FEATURES))
     penalty[NUMBER_FEATURES] = 0.0
 
     def loss(w):
-        total, grad = 0.0, np.zeros_like(w)
-        for rows, expected in usable:
-            s = rows @ w
-            p = np.exp(s - s.max())
-            p /= p.sum()
-            right = p[expected].sum()
-            total -= np.log(right + 1e-12)
-            grad -= p[expected] @ rows[expected] / (right + 1e-12) - p @ rows
-        n = len(usable)
-        return total / n + l2 * (penalty * w) @ w, grad / n + 2 * l2 * penalty * w
+        s = np.where(exists, x @ w, -np.inf)
+        e = np.exp(s - s.max(axis=1, keepdims=True))
+        total, hit = e.sum(axis=1), (e * right).sum(axis=1)
+        p, q = e / total[:, None], e * right / (hit[:, None] + 1e-300)
+        value = -np.mean(np.log(hit / total + 1e-12))
+        grad = np.einsum("nl,nlf->f", p - q, x) / len(x)
+        return value + l2 * (penalty * w) @ w, grad + 2 * l2 * penalty * w
 
     result = minimize(loss, np.ones(len(FEATURES)), jac=True, method="L-BFGS-B")
     return {name: float(v) for name, v in zip(FEATURES, result.x)}
 
 
 def _answers(items, weights, descriptions):
-    """(best score's lead over the mean score, has a place, top-1 right) per phrase."""
+    """(best score's lead over the mean score, has a place, top-1 right, gap to the second,
+    top-3 right) per phrase."""
     out = []
     for item in items:
         s = scores(item, weights, descriptions)
         top = int(np.argmax(s))
-        out.append((float(s[top] - s.mean()), bool(item.expected), top in item.expected))
+        lead, gap = lead_and_gap(s)
+        top3 = set(np.argsort(-s)[:3].tolist())
+        out.append((lead, bool(item.expected), top in item.expected, gap,
+                    bool(top3 & set(item.expected))))
     return out
 
 
 def _right(answers, threshold):
     return sum((has and hit and best >= threshold) or (not has and best < threshold)
-               for best, has, hit in answers)
+               for best, has, hit, *_ in answers)
+
+
+def _quantile_cut(leads: Sequence[float], q: float) -> float:
+    """A threshold below which a share `q` of these margins falls (q 0: below all of them)."""
+    ordered = np.sort(np.asarray(leads, dtype=np.float64))
+    k = int(np.floor(q * len(ordered)))
+    if k <= 0:
+        return float(ordered[0] - 1e-6)
+    return float((ordered[k - 1] + ordered[min(k, len(ordered) - 1)]) / 2)
 
 
 def choose_threshold(items: Sequence[Scored], weights: RankingWeights) -> float:
-    """The no-match threshold answering most phrases right (middle of the best interval)."""
+    """The no-match threshold: the largest quantile (QUANTILES) of answerable phrases' margins
+    whose inner leave-one-building-out wrong refusals stay within FALSE_NO_MATCH_BUDGET on every
+    inner held-out building."""
     answers = _answers(items, weights, descriptions=False)
-    bests = sorted({a[0] for a in answers})
-    cuts = [bests[0] - 1.0] + [(a + b) / 2 for a, b in zip(bests, bests[1:])] + [bests[-1] + 1.0]
-    right = [_right(answers, cut) for cut in cuts]
-    top = max(right)
-    best_cuts = [c for c, r in zip(cuts, right) if r == top]
-    return float(np.median(best_cuts)) if len(best_cuts) % 2 else float(
-        best_cuts[len(best_cuts) // 2])
+    buildings = [i.building for i in items]
+    leads = {b: [a[0] for a, ib in zip(answers, buildings) if ib == b and a[1]]
+             for b in dict.fromkeys(buildings)}
+    chosen = 0.0
+    for q in QUANTILES:
+        worst = 0.0
+        for held_out in leads:
+            others = [v for b, vs in leads.items() if b != held_out for v in vs]
+            cut = _quantile_cut(others, q)
+            worst = max(worst, sum(v < cut for v in leads[held_out]) / len(leads[held_out]))
+        if worst <= FALSE_NO_MATCH_BUDGET:
+            chosen = q
+    return _quantile_cut([v for vs in leads.values() for v in vs], chosen)
+
+
+def fit_confidence(items: Sequence[Scored], weights: RankingWeights,
+                   l2: float = L2) -> Tuple[float, float, float]:
+    """(bias, lead, gap) of a logistic regression of "the first label is right" (a phrase
+    without a place: never right) on the lead over the mean and the gap to the second."""
+    answers = _answers(items, weights, descriptions=False)
+    x = np.array([[1.0, a[0], a[3]] for a in answers])
+    y = np.array([float(a[1] and a[2]) for a in answers])
+
+    def loss(w):
+        z = x @ w
+        p = 1.0 / (1.0 + np.exp(-z))
+        nll = np.mean(np.logaddexp(0.0, z) - y * z)
+        return nll + l2 * w[1:] @ w[1:], x.T @ (p - y) / len(y) + 2 * l2 * np.r_[0.0, w[1:]]
+
+    result = minimize(loss, np.zeros(3), jac=True, method="L-BFGS-B")
+    return tuple(float(v) for v in result.x)
 
 
 def choose_offset(items: Sequence[Scored], weights: RankingWeights) -> float:
@@ -153,6 +214,8 @@ def choose(items: Sequence[Scored], chosen_on: str) -> RankingWeights:
                               if k not in OPTIONAL_SOURCES or k in used}, chosen_on=chosen_on)
     weights.no_match_margin = choose_threshold(items, weights)
     weights.description_offset = choose_offset(items, weights)
+    weights.confidence = fit_confidence(items, weights)
+    weights.sure_confidence = SURE_CONFIDENCE
     return weights
 
 
@@ -173,7 +236,31 @@ def evaluate(items: Sequence[Scored], weights: RankingWeights, descriptions: boo
     return {"n_place": len(with_place), "n_none": len(without),
             "top1": sum(a[2] for a in with_place) / max(1, len(with_place)),
             "top1_hits": sum(a[2] for a in with_place),
+            "top3_hits": sum(a[4] for a in with_place),
             "answered": _right(answers, threshold) / max(1, len(answers)),
             "no_match_recall": sum(a[0] < threshold for a in without) / max(1, len(without)),
             "false_no_match": sum(a[0] < threshold for a in with_place) / max(1, len(with_place)),
-            "misses": misses}
+            "no_match_hits": sum(a[0] < threshold for a in without),
+            "false_no_match_hits": sum(a[0] < threshold for a in with_place),
+            **_sureness(answers, weights), "misses": misses}
+
+
+def _sureness(answers, weights: RankingWeights) -> dict:
+    """Counts of the confidence's verdicts on answered phrases (not refused): "sure" ones that
+    were right / wrong, "not sure" ones that were right / wrong (wrong: a phrase without a place
+    or a wrong first label); phrases without a place that got "no match" or "not sure"; and the
+    Brier score of the confidence."""
+    out = {"sure_right": 0, "sure_wrong": 0, "unsure_right": 0, "unsure_wrong": 0,
+           "none_flagged": 0}
+    brier = []
+    for lead, has, hit, gap, _ in answers:
+        confidence = weights.confidence_of(lead, gap)
+        right = has and hit
+        brier.append((confidence - right) ** 2)
+        sure = not confidence < weights.sure_confidence
+        out["none_flagged"] += not has and (lead < weights.no_match_margin or not sure)
+        if lead < weights.no_match_margin:
+            continue
+        out[("sure_" if sure else "unsure_") + ("right" if right else "wrong")] += 1
+    out["brier"] = float(np.mean(brier)) if brier else float("nan")
+    return out

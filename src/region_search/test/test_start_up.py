@@ -14,7 +14,6 @@ readiness themselves, every run. Backends: word2vec serving a small hand-made ve
 (ready at once), and the default sentence model (seconds of loading).
 """
 import threading
-import time
 
 import numpy as np
 import pytest

@@ -12,7 +12,9 @@ Each label gets one row of evidence (`FEATURES`) for a phrase:
 - `spelling`: how much of the phrase spells the label's name, each name word weighted by how
   specific it is in this label set (a word every label has, such as "room", counts little);
 - `number_match` / `number_mismatch`: the phrase names a number the label carries / the label
-  carries only other numbers (room 321 is not room 312).
+  carries only other numbers (room 321 is not room 312);
+- `query_words` (word2vec only; 0 with the sentence backend): as `expanded`, with the phrase's
+  words expanded by their own WordNet words too ("launder my shirts": launder -> laundry).
 
 The similarities come from the embedding backend: phrase vectors of the sentence model
 (`SentenceFeatures`), or word vectors with the word-by-word method (`WordFeatures`). A label's
@@ -32,17 +34,22 @@ Label sets are replaced atomically: `set_regions` computes everything for the ne
 embedding backend may fail or still be loading half-way) and only then publishes it; a failed
 call leaves the previous labels in use, and the next call goes on where it stopped.
 """
-import math
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from region_search.corpora import WordNet
 from region_search.embeddings import EmbeddedWords, phrase_tokens
-from region_search.errors import EmbeddingError, LabelFileError
+from region_search.errors import EmbeddingError
 from region_search.knowledge import PlaceKnowledge
+from region_search.ranking_settings import (
+    DEFAULT_WEIGHTS_PATH,
+    FEATURES,
+    RankingWeights,
+    lead_and_gap,
+    load_ranking_weights,
+)
 from region_search.recommender import (
     ExpansionWeights,
     LabelExpander,
@@ -66,73 +73,7 @@ __all__ = ["FEATURES", "RankingWeights", "load_ranking_weights", "DEFAULT_WEIGHT
            "QueryEvidence", "SentenceFeatures", "WordFeatures", "PlaceRecommender",
            "specific_spelling", "lead_and_gap"]
 
-FEATURES = ("name", "knowledge", "expanded", "compounds", "spelling", "number_match",
-            "number_mismatch")
-DEFAULT_WEIGHTS_PATH = Path(__file__).resolve().parent / "ranking_weights.yaml"
 Embed = Callable[[List[str]], EmbeddedWords]
-
-
-@dataclass
-class RankingWeights:
-    """How evidence adds up to a label's score, and when nothing matches."""
-
-    weights: Dict[str, float]
-    description_offset: float = 0.0
-    no_match_margin: float = float("-inf")
-    chosen_on: str = ""
-    # (bias, lead, gap) of the logistic confidence; () = not calibrated (confidence nan)
-    confidence: Tuple[float, ...] = ()
-    sure_confidence: float = 0.5
-
-    def confidence_of(self, lead: float, gap: float) -> float:
-        """How likely the best label is the place meant, from its lead over the mean score and
-        its gap to the second best (nan without a calibration)."""
-        if len(self.confidence) != 3:
-            return float("nan")
-        bias, a, b = self.confidence
-        z = bias + a * lead + b * gap
-        return 1.0 / (1.0 + math.exp(-z)) if z > -700 else 0.0
-
-    def vector(self) -> np.ndarray:
-        unknown = sorted(set(self.weights) - set(FEATURES))
-        if unknown:
-            raise LabelFileError(f"unknown ranking features {unknown}; known: {FEATURES}")
-        return np.array([float(self.weights.get(name, 0.0)) for name in FEATURES])
-
-    def as_dict(self) -> dict:
-        return {"weights": {k: round(float(v), 4) for k, v in self.weights.items()},
-                "description_offset": round(float(self.description_offset), 4),
-                "no_match_margin": round(float(self.no_match_margin), 4),
-                "confidence": [round(float(v), 4) for v in self.confidence],
-                "sure_confidence": round(float(self.sure_confidence), 4),
-                "chosen_on": self.chosen_on}
-
-
-def load_ranking_weights(backend: str, path="") -> RankingWeights:
-    """The weights of a backend ("sentence" or "word2vec") from a YAML file (default: the
-    shipped region_search/ranking_weights.yaml); LabelFileError when missing or malformed."""
-    import yaml
-
-    path = Path(path) if path else DEFAULT_WEIGHTS_PATH
-    try:
-        data = yaml.safe_load(path.read_text())
-        entry = data[backend]
-        weights = RankingWeights({str(k): float(v) for k, v in entry["weights"].items()},
-                                 float(entry.get("description_offset", 0.0)),
-                                 float(entry.get("no_match_margin", float("-inf"))),
-                                 str(entry.get("chosen_on", "")),
-                                 tuple(float(v) for v in entry.get("confidence", ()) or ()),
-                                 float(entry.get("sure_confidence", 0.5)))
-        if weights.confidence and len(weights.confidence) != 3:
-            raise ValueError(f"confidence needs 3 numbers (bias, lead, gap), got "
-                             f"{list(weights.confidence)}")
-        weights.vector()
-        return weights
-    except OSError as err:
-        raise LabelFileError(f"cannot read ranking weights {path}: {err.strerror}") from err
-    except (yaml.YAMLError, KeyError, TypeError, ValueError, AttributeError) as err:
-        raise LabelFileError(f"ranking weights {path} have no valid entry for backend "
-                             f"{backend!r}: {err!r}") from err
 
 
 def specific_spelling(words: Sequence[str], name_words: Sequence[str],
@@ -291,13 +232,14 @@ class SentenceFeatures:
             compounds = float(np.max(own["compounds"] @ vector)) if len(own["compounds"]) else 0.0
             row = [float(own["name"][0] @ vector), float(own["knowledge"][0] @ vector),
                    float(own["expanded"][0] @ vector), compounds,
-                   *_LabelSet.lexical(labels, phrase, name)]
+                   *_LabelSet.lexical(labels, phrase, name), 0.0]
             rows.append(row)
             description = labels.described[name]
             if description:
                 any_described = True
                 described_rows.append([float(own["described"][0] @ vector), *row[1:4],
-                                       *_LabelSet.lexical(labels, phrase, name, description)])
+                                       *_LabelSet.lexical(labels, phrase, name, description),
+                                       0.0])
             else:
                 described_rows.append(row)
         notes = [n for n in "; ".join(query.notes).split("; ") if n]
@@ -321,6 +263,10 @@ class WordFeatures:
                                             hubness=True, name_text_weight=0.0,
                                             number_words=False)
                           if wordnet is not None else self._names)
+        self._query_words = (RegionRecommender(embed_words, wordnet=wordnet, weights=expansion,
+                                               hubness=True, name_text_weight=0.0,
+                                               expand_query=True, number_words=False)
+                             if wordnet is not None else None)
         self._described = RegionRecommender(embed_words, number_words=False)
         self._words: Dict[str, Tuple[Optional[np.ndarray], float]] = {}
         self._cache: Dict[str, Dict[str, np.ndarray]] = {}  # name -> its knowledge texts' means
@@ -334,6 +280,8 @@ class WordFeatures:
         self._names.set_regions(bare)
         if self._expanded is not self._names:
             self._expanded.set_regions(bare)
+        if self._query_words is not None:
+            self._query_words.set_regions(bare)
         self._described.set_regions([Region(n, 0.0, 0.0, description=labels.described[n])
                                      for n in labels.names])
         means = {}
@@ -382,6 +330,8 @@ class WordFeatures:
         labels, label_means = self._state  # one published label set for the whole phrase
         names = self._scores(self._names, phrase)
         expanded = self._scores(self._expanded, phrase)
+        query_words = (self._scores(self._query_words, phrase) if self._query_words is not None
+                       else dict.fromkeys(labels.names, 0.0))
         described = self._scores(self._described, phrase)
         self._learn_words([phrase])
         query = self._mean(phrase)
@@ -391,13 +341,14 @@ class WordFeatures:
             means = label_means[name]
             row = [names[name], _cosine(means["knowledge"], query),
                    expanded[name], _cosine(means["compounds"], query),
-                   *_LabelSet.lexical(labels, phrase, name)]
+                   *_LabelSet.lexical(labels, phrase, name), query_words[name]]
             rows.append(row)
             description = labels.described[name]
             if description:
                 any_described = True
                 described_rows.append([described[name], *row[1:4],
-                                       *_LabelSet.lexical(labels, phrase, name, description)])
+                                       *_LabelSet.lexical(labels, phrase, name, description),
+                                       query_words[name]])
             else:
                 described_rows.append(row)
         embedded = self.embed_words(phrase_tokens(phrase))
@@ -413,16 +364,6 @@ class WordFeatures:
 def _matrix(rows: list) -> np.ndarray:
     """Evidence rows as a (labels, features) matrix, also when there are no labels."""
     return np.array(rows, dtype=np.float64).reshape(len(rows), len(FEATURES))
-
-
-def lead_and_gap(scores: np.ndarray) -> Tuple[float, float]:
-    """The best score's lead over the mean score, and its gap to the second best (0 with
-    one label; -inf, 0 with none): what the no-match answer and the confidence look at."""
-    if len(scores) == 0:
-        return float("-inf"), 0.0
-    ordered = np.sort(np.asarray(scores, dtype=np.float64))[::-1]
-    gap = float(ordered[0] - ordered[1]) if len(ordered) > 1 else 0.0
-    return float(ordered[0] - np.mean(ordered)), gap
 
 
 def _closest(rows: np.ndarray, anchor: np.ndarray, keep: int) -> np.ndarray:

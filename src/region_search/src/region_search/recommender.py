@@ -237,7 +237,7 @@ def distinct_places(regions: Sequence[Region]) -> List[Region]:
     for region in regions:
         groups.setdefault(region.name, []).append(region)
     merged = []
-    for name, group in groups.items():
+    for group in groups.values():
         chosen = next((r for r in group if r.source == "label_file"), group[0])
         sources = "+".join(dict.fromkeys(r.source for r in group))
         description = next((r.description for r in group if r.description), "")
