@@ -4,7 +4,8 @@ the standard load beside `rosbag record` of the same topics, at the same time, i
 Configurations (the database servers run on this machine; the robot side is what runs on the
 robot in each configuration):
 - `remote_<backend>`: ros_mongo_server writing to a database on another machine (robot side: the
-  recorder);
+  recorder); `remote_couchdb_chunked` the same with odometry and scans stored as chunks
+  (`~chunk_topics`, ros_mongo.chunks);
 - `fleet_default`: launch/fleet.launch as shipped, straight to the central CouchDB database with
   the spool as the buffer (robot side: the recorder);
 - `fleet_local_store`: fleet.launch local_db:=true: a local pouchdb-server and the replicator
@@ -36,8 +37,10 @@ from ros_mongo import open_store
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 FLEET_LAUNCH = str(ROOT / "launch" / "fleet.launch")
-CONFIGS = ("remote_couchdb", "remote_mongodb", "fleet_default", "fleet_local_store")
+CONFIGS = ("remote_couchdb", "remote_couchdb_chunked", "remote_mongodb", "fleet_default", "fleet_local_store")
+CHUNK_TOPICS = ["/odom", "/scan"]
 TITLES = {"remote_couchdb": "recorder -> database on another machine (CouchDB)",
+          "remote_couchdb_chunked": "recorder -> CouchDB elsewhere, odometry and scans as chunks",
           "remote_mongodb": "recorder -> database on another machine (MongoDB)",
           "fleet_default": "fleet default: recorder -> central, spool as buffer",
           "fleet_local_store": "fleet local_db:=true: recorder -> local store -> replication"}
@@ -82,10 +85,11 @@ def _start(name, core, servers, work):
     launches = LaunchSet(core, work / "logs" / name)
     spool = str(work / f"{name}.spool")
     if name.startswith("remote_"):
-        url = servers[name.split("_", 1)[1]].database_url(f"bench_{name}")
+        url = servers[name.split("_")[1]].database_url(f"bench_{name}")
+        chunks = {"chunk_topics": CHUNK_TOPICS} if name.endswith("_chunked") else {}
         launch = launches.node("ros_mongo", "ros_mongo_server", params={
             "db_url": url, "topics": list(TOPICS), "session_id": f"bench_{name}", "spool_path": spool,
-            "robot_id": "bench_robot", "diagnostics_period": 0.5, "shutdown_timeout": 120.0})
+            "robot_id": "bench_robot", "diagnostics_period": 0.5, "shutdown_timeout": 120.0, **chunks})
         return launches, {"recorder": _node_pid(launch, "/ros_mongo_server")}, url, []
     url = servers["couchdb"].database_url(f"bench_{name}")
     if name == "fleet_default":
