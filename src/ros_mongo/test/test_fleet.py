@@ -56,9 +56,10 @@ def robot_counts(db_url):
 
 def test_selector_keeps_design_docs_tombstones_and_local_topics_home():
     spec = ReplicationSpec(local_topics=("/camera/rgb/image_raw",))
-    assert spec.selector() == {"kind": {"$in": ["message", "topic"]},
+    assert spec.selector() == {"kind": {"$in": ["message", "chunk", "topic"]},
                                "topic": {"$nin": ["/camera/rgb/image_raw"]}}
     assert spec.selects({"_id": "m", "kind": "message", "topic": "/odom"})
+    assert spec.selects({"_id": "c", "kind": "chunk", "topic": "/odom"})
     assert spec.selects({"_id": "t", "kind": "topic", "topic": "/odom"})
     assert not spec.selects({"_id": "_design/idx", "views": {}})
     assert not spec.selects({"_id": "m", "_deleted": True})
