@@ -143,7 +143,10 @@ def test_learns_from_every_robot_through_central_and_resumes_after_a_restart(
         assert "learned from 3 robots" in text
         assert f"model of {sum(rows for rows, _ in first.values())} rows" in text
         assert "central http://127.0.0.1" in text
-        saved = rospy.ServiceProxy(f"{NODE}/save_model", Trigger)()
+        # the baselines serve at once; the GP is fitted in the background, and only a GP saves
+        save = rospy.ServiceProxy(f"{NODE}/save_model", Trigger)
+        saved = wait_until(lambda: (lambda r: r if r.success else None)(save()), 2 * LONG,
+                           what="the GP fitted in the background, saved")
         assert saved.success, saved.message
         saved_learned = json.loads(Path(str(model_path) + ".learned.json").read_text())
         assert saved_learned["robots"] == {robot: list(counts) for robot, counts in first.items()}

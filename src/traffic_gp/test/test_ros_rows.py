@@ -53,35 +53,3 @@ def test_malformed_messages_are_refused(server, fields, match):
     cells = [Point(10.2, 6.6, 0)] if fields else []
     with pytest.raises(TrafficError, match=match):
         server.to_rows(message(cells=cells, **fields))
-
-
-def test_the_node_fits_afresh_once_its_rows_have_doubled():
-    """The first fit once min_rows are in; later rows folded in online; a whole new fit (its
-    choices made again) when the rows have doubled since the last one, not before."""
-    import rospy
-
-    rospy.rostime.set_rostime_initialized(True)      # wall-clock ROS time: no master here
-    params = TrafficServerParams(utc_offset_hours=0.0, min_rows=40, initial_steps=5,
-                                 refit_growth=2.0, model={"n_inducing": 5, "hourly": False,
-                                                          "likelihood": "poisson",
-                                                          "profile": "none", "refit_steps": 0})
-    node = TrafficServer(params)
-    node._set_map(generate_building(0).grid)
-    cells = node.cells
-
-    def feed(hour):
-        msg = PeopleCount(robot_id="r1", cells=[Point(x, y, 0) for x, y in
-                                                zip(cells.x[:40], cells.y[:40])],
-                          seen_fraction=[1.0] * 40, counts=[1] * 40)
-        msg.header.stamp = sim_stamp(hour, 0.0)
-        node._inbox.put(msg)
-        node.train_once()
-
-    feed(10.0)
-    first = node.model
-    assert first is not None and first.n_rows_ == 40 and node._full_fit_rows == 40
-    feed(11.0)                                  # 80 rows: twice the last fit's
-    assert node.model is not first and node.model.n_rows_ == 80 and node._full_fit_rows == 80
-    second = node.model
-    feed(12.0)                                  # 120 rows: folded in online
-    assert node.model is second and node.model.n_rows_ == 120

@@ -35,9 +35,6 @@ class _CellBaseline:
         if not hasattr(self, "global_rate_"):
             raise NotFittedError(f"{type(self).__name__} is not fitted yet")
 
-    def _global(self, obs: Observations) -> None:
-        self.global_rate_ = max(obs.count.sum(), 0.5) / obs.exposure.sum()
-
     def predict(self, x, y, t, exposure=1.0) -> np.ndarray:
         """Expected counts (densities for exposure 1)."""
         self._check_fitted()
@@ -95,14 +92,22 @@ class BinnedMean(_CellBaseline):
         return np.minimum((np.mod(t, self.period) * 60.0 / self.bin_minutes).astype(int), n_bins - 1)
 
     def fit(self, obs: Observations) -> "BinnedMean":
-        self._global(obs)
         n_bins = int(np.ceil(self.period * 60.0 / self.bin_minutes))
+        self._sums = (np.zeros((0, n_bins)), np.zeros((0, n_bins)), 0.0, 0.0)
+        return self.update(obs)
+
+    def update(self, obs: Observations) -> "BinnedMean":
+        """Add rows to a model fitted in this process (its sums; cells may have been added)."""
+        counts, expo, total_count, total_expo = self._sums
+        n_cells, n_bins = self.cells.n_cells, counts.shape[1]
+        counts, expo = (np.pad(a, ((0, n_cells - a.shape[0]), (0, 0))) for a in (counts, expo))
         cell = self._cell_index(obs.x, obs.y)
         ok = cell >= 0
-        shape = (self.cells.n_cells, n_bins)
-        key = np.ravel_multi_index((cell[ok], self._bins(obs.t[ok])), shape)
-        counts = np.bincount(key, obs.count[ok], np.prod(shape)).reshape(shape)
-        expo = np.bincount(key, obs.exposure[ok], np.prod(shape)).reshape(shape)
+        key = np.ravel_multi_index((cell[ok], self._bins(obs.t[ok])), counts.shape)
+        counts = counts + np.bincount(key, obs.count[ok], counts.size).reshape(counts.shape)
+        expo = expo + np.bincount(key, obs.exposure[ok], expo.size).reshape(expo.shape)
+        self._sums = (counts, expo, total_count + obs.count.sum(), total_expo + obs.exposure.sum())
+        self.global_rate_ = max(self._sums[2], 0.5) / max(self._sums[3], 1e-12)
         cell_rate = np.where(expo.sum(1) > 0, counts.sum(1) / np.maximum(expo.sum(1), 1e-12),
                              self.global_rate_)
         self.rate_ = np.where(expo > 0, counts / np.maximum(expo, 1e-12), cell_rate[:, None])
@@ -136,16 +141,27 @@ class FreMEn(_CellBaseline):
         return 2.0 * np.pi * np.arange(1, n + 1) / self.period
 
     def fit(self, obs: Observations) -> "FreMEn":
-        self._global(obs)
+        size = self.omegas.size
+        self._sums = (np.zeros(0), np.zeros(0), np.zeros((0, size), complex),
+                      np.zeros((0, size), complex), 0.0, 0.0)
+        return self.update(obs)
+
+    def update(self, obs: Observations) -> "FreMEn":
+        """Add rows to a model fitted in this process (its running sums; cells may have been
+        added); the order stays."""
+        n_cells, omegas = self.cells.n_cells, self.omegas
+        expo, counts, states, balance, total_count, total_expo = self._sums
+        grow = n_cells - expo.size
+        expo, counts = np.pad(expo, (0, grow)), np.pad(counts, (0, grow))
+        states, balance = (np.pad(a, ((0, grow), (0, 0))) for a in (states, balance))
         cell = self._cell_index(obs.x, obs.y)
         ok = np.nonzero(cell >= 0)[0]
-        n_cells, omegas = self.cells.n_cells, self.omegas
-        expo = np.bincount(cell[ok], obs.exposure[ok], n_cells)
-        counts = np.bincount(cell[ok], obs.count[ok], n_cells)
+        expo = expo + np.bincount(cell[ok], obs.exposure[ok], n_cells)
+        counts = counts + np.bincount(cell[ok], obs.count[ok], n_cells)
+        total_count, total_expo = total_count + obs.count.sum(), total_expo + obs.exposure.sum()
+        self.global_rate_ = max(total_count, 0.5) / max(total_expo, 1e-12)
         self.mean_ = np.where(expo > 0, counts / np.maximum(expo, 1e-12), self.global_rate_)
         # Running sums per cell and frequency: sum n e^{-iwt} and the balance sum e e^{-iwt}.
-        states = np.zeros((n_cells, omegas.size), complex)
-        balance = np.zeros((n_cells, omegas.size), complex)
         for start in range(0, ok.size, self.chunk):
             rows = ok[start:start + self.chunk]
             phase = np.exp(-1j * np.outer(obs.t[rows], omegas))
@@ -153,6 +169,7 @@ class FreMEn(_CellBaseline):
                                        shape=(n_cells, rows.size))
             states += member @ (obs.count[rows, None] * phase)
             balance += member @ (obs.exposure[rows, None] * phase)
+        self._sums = (expo, counts, states, balance, total_count, total_expo)
         self.spectrum_ = (states - self.mean_[:, None] * balance) / np.maximum(expo, 1e-12)[:, None]
         return self.set_order(self.order)
 

@@ -294,3 +294,20 @@ def assign_parameter_values(model, values: Dict[str, np.ndarray]) -> None:
             raise ModelFormatError(f"saved {path} has shape {np.shape(values[path])}, "
                                    f"the model needs {tuple(target.shape)}")
         target.assign(values[path])
+
+
+def assign_hyperparameters(model, values: Dict[str, np.ndarray]) -> int:
+    """Warm start: set the kernel's and the likelihood's parameters (not q(u), the inducing
+    points or the mean) from `parameter_values` of a model of the same settings, where the
+    shapes agree; returns how many were set."""
+    gpflow = libs().gpflow
+    done = 0
+    for path, variable in gpflow.utilities.parameter_dict(model).items():
+        if not path.startswith((".kernel", ".likelihood")) or path not in values:
+            continue
+        target = variable.unconstrained_variable if isinstance(variable, gpflow.Parameter) \
+            else variable
+        if tuple(target.shape) == tuple(np.shape(values[path])):
+            target.assign(values[path])
+            done += 1
+    return done

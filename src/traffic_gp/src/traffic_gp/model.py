@@ -18,7 +18,7 @@ rush before the hour] [+ space x weekly cycle]; optionally a per-place rate prof
   3. fits FreMEn and the binned mean on the same rows and serves, globally and per place,
      whichever forecast the held-out days better (`serving.py`, `fallback`);
   4. calibrates the served intervals' width on the held-out days (`calibration.py`,
-     `calibrate`): 90% intervals hold 87.5-92.5% of the held-out counts where any width can;
+     `calibrate`): 90% intervals holding as near 90% of the held-out counts as any width does;
   5. folds the held-out days in (the profile, `refit_steps` gentle steps of the GP, the
      baselines refitted on all rows).
 `selection_`, `serving_.report`, `split_` and `status()` say what was chosen and why; the saved
@@ -104,8 +104,8 @@ class TrafficGP(Training, LatentPredictions):
                  spatial_inputs: str = AUTO, geodesic_dims: int = DEFAULT_DIMS,
                  profile: str = AUTO, profile_bin_minutes: float = 60.0,
                  profile_prior_exposure: float = 1.0, screen_inducing: int = 100,
-                 screen_steps: int = 300, screen_rows: int = 20000, fallback: bool = True,
-                 calibrate: bool = True, refit_steps: int = 200, progress: bool = False):
+                 screen_steps: int = 200, screen_rows: int = 20000, fallback: bool = True,
+                 calibrate: bool = True, refit_steps: int = 100, progress: bool = False):
         self.n_inducing, self.spatial_lengthscale = n_inducing, spatial_lengthscale
         self.hourly, self.weekly = hourly, weekly
         self.batch_size, self.n_steps, self.online_steps = batch_size, n_steps, online_steps
@@ -162,11 +162,14 @@ class TrafficGP(Training, LatentPredictions):
 
     # ---- training -------------------------------------------------------------------------
     def fit(self, obs: Observations, n_steps: Optional[int] = None, *,
-            cells: Optional[CellGrid] = None) -> "TrafficGP":
+            cells: Optional[CellGrid] = None, warm_start: Optional[dict] = None) -> "TrafficGP":
         """Start afresh on `obs` (see the module docstring); at most `n_steps` (default
         `self.n_steps`) steps of the final fit; `cells` (the map's cell grid) makes the
-        geodesic spatial inputs possible and the map's cells the baselines' places."""
+        geodesic spatial inputs possible and the map's cells the baselines' places;
+        `warm_start` (`gp_parts.parameter_values` of a model of the same settings) starts the
+        kernel and likelihood from there (a refit on more rows)."""
         self._check_params()
+        self._warm = warm_start
         if len(obs) == 0:
             raise NotFittedError("cannot fit on zero observations")
         if self.spatial_inputs == "geodesic" and cells is None:
@@ -208,7 +211,7 @@ class TrafficGP(Training, LatentPredictions):
                     fallback=self.fallback, calibrated=self.calibrate,
                     seed=self.random_state or 0)
             self._fold_in(held, obs)
-        self.data_, self._embedding = obs, None
+        self.data_, self._embedding, self._warm = obs, None, None
         self._serving_rows = len(obs)
         self.fit_seconds_ = time.perf_counter() - began
         log.info("traffic_gp: %s", self.status())
@@ -242,6 +245,8 @@ class TrafficGP(Training, LatentPredictions):
             hourly=settings["hourly"], weekly=settings["weekly"], log_mean=float(np.log(rate)),
             num_data=len(rows), train_inducing=self.train_inducing,
             likelihood=settings["likelihood"])
+        if getattr(self, "_warm", None):
+            gp_parts.assign_hyperparameters(self.model_, self._warm)
         self.n_steps_, self.train_seconds_, self.compile_seconds_ = 0, 0.0, 0.0
         self.elbo_, self.eval_steps_, self.validation_loss_ = [], [], []
         self.best_step_, self.stopped_early_, self.anneal_start_ = None, False, None

@@ -32,14 +32,19 @@ class TrafficServerParams(CentralSourceParams):
                               "(observations; simulations)", choices=("ros", "observations"))
     dwell_time: float = param(20.0, "s; counts over a watch of d seconds: exposure x "
                                     "(1 + d / dwell_time)")
-    min_rows: int = param(2000, "observation rows before the first fit")
-    initial_steps: int = param(600, "maximum training steps of a fit from scratch (the first "
-                                    "and each refit; after its choice of settings on the most "
-                                    "recent days)")
-    refit_growth: float = param(2.0, "fit afresh (settings, served forecaster and intervals "
-                                     "chosen again on the most recent days) whenever the rows "
-                                     "have grown this many times since the last fit; 0: never",
-                                minimum=0.0)
+    min_rows: int = param(2000, "observation rows before the first fit (the baselines are "
+                                "served at once, the GP is chosen and fitted in the background)")
+    initial_steps: int = param(600, "maximum training steps of a GP fit in the background (the "
+                                    "first and each refit; after its choice of settings on the "
+                                    "most recent days)")
+    refit_growth: float = param(2.0, "refit the GP in the background (its chosen settings, warm "
+                                     "start; served forecaster and intervals chosen again on the "
+                                     "most recent days) whenever the rows have grown this many "
+                                     "times since the last fit; 0: never", minimum=0.0)
+    reselect_growth: float = param(8.0, "choose the GP's settings again (candidates screened on a "
+                                        "sample of at most screen_rows rows) whenever the rows "
+                                        "have grown this many times since the last choice; 0: "
+                                        "never", minimum=0.0)
     train_period: float = param(2.0, "s between training rounds")
     chunk_steps: int = param(20, "training steps per lock hold (services wait at most one chunk)")
     publish_period: float = param(5.0, "s between cost map publications")

@@ -27,10 +27,11 @@ from ros_mongo.changes import ChangesFollower
 from ros_mongo.errors import StoreError
 from ros_mongo.urls import redact_url, warn_password_in_url
 from traffic_gp.errors import TrafficError
-from traffic_gp.model import TrafficGP
+from traffic_gp.learning import Learner
 from traffic_gp.observations import Observations, aggregate_view, hours_since_monday
 from traffic_gp.params import TrafficServerParams
 from traffic_gp.posterior import PosteriorSnapshot
+from traffic_gp.quick import BaselineForecast
 from traffic_gp.queries import CrowdQueries
 from traffic_gp.srv import PredictCount, PredictCountResponse, PredictRegion, PredictRegionResponse
 
@@ -64,10 +65,13 @@ class TrafficServer:
       ~lookahead_step_minutes (5), ~saturation_density (1 person/m^2 = 95), ~wall_value (-1 or
       100), ~full_resolution (true: cost maps at the map's resolution), ~frame_id ("map"),
       ~model ({}: dict of TrafficGP keyword arguments).
-    The first fit (once ~min_rows rows are in) is `TrafficGP.fit`: it holds out the most recent
-      days, chooses the settings on them, serves FreMEn or the binned mean where they forecast
-      those days better and calibrates the intervals; later rows are folded in online, and the
-      whole fit is made again on all rows whenever they have grown ~refit_growth (2) times.
+    Learning (`learning.Learner`): once ~min_rows rows are in, the tuned baselines are served at
+      once (the status says so) while `TrafficGP.fit` (hold-out of the most recent days, the
+      settings chosen on them, the baselines served where they forecast those days better,
+      calibrated intervals) runs in the background; new rows are folded into what is served at
+      once; the GP is refitted in the background (chosen settings, warm start) whenever the
+      rows have grown ~refit_growth (2) times, its settings chosen again after
+      ~reselect_growth (8) times.
       ~source ("topic": the `people_counts` topic; "central": the `_changes` feed of the central
       fleet database ~central_url, PeopleCount message documents of every robot, optionally of
       ~central_topics only), ~central_credentials_file.
@@ -88,20 +92,28 @@ class TrafficServer:
     def __init__(self, config: TrafficServerParams):
         self.config = config
         self.cells: Optional[CellGrid] = None
-        self.model = None
+        self.learner = Learner(config.model, min_rows=config.min_rows,
+                               initial_steps=config.initial_steps,
+                               refit_growth=config.refit_growth,
+                               reselect_growth=config.reselect_growth,
+                               chunk_steps=config.chunk_steps)
         self.rows_seen = 0
         self.messages_taken = 0         # PeopleCount messages taken from the inbox
         self.last_stamp = 0.0
         self._inbox = queue.Queue()     # PeopleCount messages from the subscriber thread
         self._pending: List[Observations] = []
-        self._lock = threading.Lock()
+        self._lock = self.learner.lock
         self._stop = threading.Event()
         self.learned: Dict[str, List[int]] = {}          # robot -> [rows, messages] in the model
         self._pending_learned: Dict[str, List[int]] = {}  # the same for rows not folded in yet
         self.feed_seq: Any = None                         # central feed position of the model
         self._pending_seq: Any = None
         self.follower: Optional[ChangesFollower] = None
-        self._full_fit_rows = 0                           # rows of the last fit from scratch
+
+    @property
+    def model(self):
+        """The served model (None before the first fit)."""
+        return self.learner.model
 
     # ---- set-up -------------------------------------------------------------------------
     def setup(self) -> None:
@@ -132,8 +144,7 @@ class TrafficServer:
         """Serve the saved model's posterior at once (NumPy, no TensorFlow); the trainable model
         is loaded by the training thread when new observations arrive."""
         start = time.perf_counter()
-        self.model = PosteriorSnapshot.load(path)
-        self._full_fit_rows = self.model.n_rows_
+        self.learner.loaded(PosteriorSnapshot.load(path))
         rospy.loginfo(f"traffic_gp: loaded {path} ({self.model.n_steps_} steps, "
                       f"{self.model.n_rows_} rows) in {time.perf_counter() - start:.2f} s")
 
@@ -247,55 +258,21 @@ class TrafficServer:
                                           f"{type(err).__name__}: {err}")
 
     def train_once(self) -> None:
-        """Fold pending rows into the model; fit first once `min_rows` rows are there."""
+        """Fold pending rows into the served model (the first ones once `min_rows` are in), swap
+        in a finished background fit, start the fits the growth asks for (`learning.Learner`)."""
         self._drain()
-        if not self._pending:
+        trained = False
+        if self._pending:
+            new = Observations.concat(self._pending)
+            if self.learner.add(new, self.cells, self._commit_learned):   # raises: rows stay
+                self._pending, trained = [], True
+        else:
             with self._lock:
                 self._commit_learned()  # messages that gave no rows still move the feed on
-            return
-        new = Observations.concat(self._pending)
-        if self.model is None and len(new) < self.config.min_rows:
-            return
-        if isinstance(self.model, PosteriorSnapshot):     # first new rows after loading a file
-            trainable = TrafficGP.load(self.model.path)
-            with self._lock:
-                self.model = trainable
-        if self.model is None:
-            model = self._full_fit(new)       # raises: the rows stay pending
-            with self._lock:
-                self.model = model
-                self._commit_learned()
-            self._pending = []
-            rospy.loginfo(f"traffic_gp: first fit: {model.status()}")
-            return
-        steps = self.model.online_steps
-        with self._lock:
-            self.model.partial_fit(new, n_steps=0)
-            self._commit_learned()
-        self._pending = []
-        growth = self.config.refit_growth
-        if growth > 1.0 and self.model.n_rows_ >= growth * max(self._full_fit_rows, 1):
-            model = self._full_fit(self.model.data_)      # the old model serves meanwhile
-            with self._lock:
-                self.model = model
-            rospy.loginfo(f"traffic_gp: fitted afresh: {model.status()}")
-            return
-        for done in range(0, steps, self.config.chunk_steps):
-            if self._stop.is_set():
-                return
-            with self._lock:
-                self.model.partial_fit(Observations.empty(),
-                                       n_steps=min(self.config.chunk_steps, steps - done))
-        rospy.loginfo_throttle(30, f"traffic_gp: {self.model.n_rows_} rows, "
-                                   f"{self.model.n_steps_} steps, ELBO {self.model.elbo_[-1]:.0f}")
-
-    def _full_fit(self, rows: Observations) -> TrafficGP:
-        """`TrafficGP.fit` on `rows` (choices on the most recent days, the baselines, the
-        intervals), outside the lock: services answer from the model they have meanwhile."""
-        model = TrafficGP(**self.config.model).fit(rows, n_steps=self.config.initial_steps,
-                                                   cells=self.cells)
-        self._full_fit_rows = len(rows)
-        return model
+        self.learner.step(self.cells, self._stop, trained)
+        if trained and self.model is not None and self.model.n_steps_:
+            rospy.loginfo_throttle(30, f"traffic_gp: {self.model.n_rows_} rows, "
+                                       f"{self.model.n_steps_} steps")
 
     def _commit_learned(self) -> None:
         """The pending rows are in the model now (call with the lock held)."""
@@ -322,8 +299,9 @@ class TrafficServer:
             source = "topic people_counts"
         with self._lock:
             chosen = self.model.status() if self.model is not None else "no model yet"
+            doing = self.learner.describe()
         return (f"model of {model_rows} rows; learned from {len(learned)} robots: {robots}; "
-                f"source {source}; model: {chosen}")
+                f"source {source}; learner: {doing}; model: {chosen}")
 
     # ---- answers --------------------------------------------------------------------------
     def now_hours(self, stamp=None) -> float:
@@ -369,8 +347,9 @@ class TrafficServer:
                                      est.upper, est.cells, est.area)
 
     def _status(self) -> str:
+        note = self.learner.serving_note()
         return (f"ok: model of {self.model.n_rows_} rows, {self.model.n_steps_} steps; "
-                f"{self.rows_seen} rows received")
+                f"{self.rows_seen} rows received" + (f"; {note}" if note else ""))
 
     def publish(self) -> None:
         if self.model is None or self.cells is None:
@@ -401,6 +380,9 @@ class TrafficServer:
             raise TrafficError("~model_path is empty: nowhere to save")
         if self.model is None:
             raise TrafficError("no model to save yet")
+        if isinstance(self.model, BaselineForecast):
+            raise TrafficError(f"no GP to save yet ({self.learner.describe()}); save again once "
+                               f"~status no longer says the baselines are served")
         with self._lock:
             if isinstance(self.model, PosteriorSnapshot):   # nothing learnt since it was loaded
                 if os.path.abspath(self.model.path) != os.path.abspath(self.config.model_path):
@@ -420,7 +402,10 @@ class TrafficServer:
     def shutdown(self) -> None:
         self._stop.set()
         if self.config.save_on_shutdown and self.model is not None and self.config.model_path:
-            self.save()
+            try:
+                self.save()
+            except TrafficError as err:
+                rospy.logwarn(f"traffic_gp: not saved at shutdown: {err}")
 
 
 def start() -> TrafficServer:

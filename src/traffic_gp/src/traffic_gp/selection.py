@@ -10,11 +10,11 @@ A setting left at "auto" is chosen by `choose` from a small set of candidates:
 `hourly` ("auto") is not searched: the 1-hour cycle (the rush before the hour) is used when the
 rows' times fall at different minutes of the hour, and left out for counts taken once an hour
 (it cannot be seen in them).
-Search (coordinate-wise, so about 6-8 candidates instead of the 24 combinations): likelihood x
-profile with the first spatial input and the daily kernel; from the best of those the other
-spatial input; from the best then the weekly kernel. Each candidate is a short fit
+Search (coordinate-wise, so about 4-6 candidates instead of the 24 combinations): the profiles
+with the first likelihood, spatial input and the daily kernel; from the best of those the other
+likelihood; from the best then the other spatial input; from the best then the weekly kernel. Each candidate is a short fit
 (`screen_inducing` inducing points, at most `screen_steps` steps, at most `screen_rows`
-fitting rows) with early stopping on the held-out rows, scored by the held-out log predictive
+fitting rows, a sample stratified by place and hour of the day: `stratified_sample`) with early stopping on the held-out rows, scored by the held-out log predictive
 density with its best interval width (`calibration.best_log_density`: candidates compete on
 their forecasts, not on their noise models), among the candidates whose held-out RMSE of the
 expected counts is within RMSE_SLACK of the least (the crowd map serves expected counts: a
@@ -51,6 +51,28 @@ def shortest_period(t) -> float:
     """The shortest period a harmonic forecaster may use: 2 h for counts taken once an hour
     (shorter periods alias), else 10 minutes."""
     return 1.0 / 6.0 if hourly_cycle_visible(t) else 2.0
+
+
+def stratified_sample(rows: Observations, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Sorted indices of `n` of the rows (all when fewer), drawn per stratum of place (0.5 m)
+    and hour of the day in proportion to its rows, so that every busy place and hour keeps its
+    share (rounding up per stratum, then the surplus dropped at random)."""
+    if len(rows) <= n:
+        return np.arange(len(rows))
+    place = np.floor(rows.x / 0.5) * 1e6 + np.floor(rows.y / 0.5)
+    _, stratum = np.unique(np.column_stack([place, np.floor(np.mod(rows.t, 24.0))]), axis=0,
+                           return_inverse=True)
+    stratum = np.ravel(stratum)
+    order = rng.permutation(len(rows))
+    order = order[np.argsort(stratum[order], kind="stable")]        # shuffled within strata
+    sizes = np.bincount(stratum)
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    rank = np.arange(len(rows)) - starts[stratum[order]]
+    quota = np.ceil(sizes * (n / len(rows))).astype(np.int64)
+    keep = order[rank < quota[stratum[order]]]
+    if keep.size > n:
+        keep = rng.choice(keep, n, replace=False)
+    return np.sort(keep)
 
 
 def options(params: dict, *, has_map: bool, fit_days: int) -> Dict[str, list]:
@@ -96,7 +118,7 @@ def choose(fit_candidate: Callable[[dict, Observations, Observations], object], 
     space = options(params, has_map=has_map, fit_days=fit_days)
     rng = np.random.default_rng(seed)
     fit_rows = fit if len(fit) <= screen_rows else fit.subset(
-        np.sort(rng.choice(len(fit), screen_rows, replace=False)))
+        stratified_sample(fit, screen_rows, rng))
     held_rows = held if len(held) <= SCORE_ROWS else held.subset(
         np.sort(rng.choice(len(held), SCORE_ROWS, replace=False)))
     hourly = hourly if params["hourly"] == AUTO else bool(params["hourly"])
@@ -130,10 +152,10 @@ def choose(fit_candidate: Callable[[dict, Observations, Observations], object], 
         close = [c for c in candidates if scores[_key(c)]["rmse"] <= (1 + RMSE_SLACK) * least]
         return max(close, key=score)
 
-    first = {"spatial_inputs": space["spatial_inputs"][0], "weekly": space["weekly"][0]}
-    best = best_of([dict(first, likelihood=lk, profile=pr)
-                    for lk in space["likelihood"] for pr in space["profile"]])
-    for name in ("spatial_inputs", "weekly"):
+    first = {"spatial_inputs": space["spatial_inputs"][0], "weekly": space["weekly"][0],
+             "likelihood": space["likelihood"][0]}
+    best = best_of([dict(first, profile=pr) for pr in space["profile"]])
+    for name in ("likelihood", "spatial_inputs", "weekly"):
         for value in space[name][1:]:
             best = best_of([best, dict(best, **{name: value})])
     mine = scores[_key(best)]

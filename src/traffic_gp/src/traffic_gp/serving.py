@@ -19,7 +19,7 @@ good), and compares the four forecasts of those days:
     places they saw).
 Then the served forecast's interval width is calibrated on the held-out counts
 (`calibration.calibrate`: dispersion and extra latent variance for 90% intervals holding
-87.5-92.5% of them). `refit` refits the baselines with their chosen settings on all rows (the
+as near 90% of them as any width does). `refit` refits the baselines with their chosen settings on all rows (the
 held-out days too) once the choices are made. `Serving` keeps everything as plain arrays and
 a JSON-able report (`to_arrays`, `from_arrays`): a saved model serves the same after loading.
 NumPy only.
@@ -203,11 +203,7 @@ class Serving:
                                f"{blend['with']})" if r["default"] == "blend" and blend else "")
         text = (f"serving {what} (held-out RMSE {rmse}); places: {counts}")
         if self.calibration is not None:
-            c = self.calibration
-            noise = "Poisson" if c.dispersion is None else f"negative binomial r={c.dispersion:.3g}"
-            text += (f"; 90% intervals: {noise}, extra log-rate variance "
-                     f"{c.latent_variance:g}, held-out coverage {c.coverage_inside:.3f} "
-                     f"(randomised PIT {c.coverage:.3f})")
+            text += "; " + self.calibration.describe()
         return text
 
     # ---- persistence ------------------------------------------------------------------------
