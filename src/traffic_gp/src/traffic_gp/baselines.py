@@ -99,7 +99,7 @@ class BinnedMean(_CellBaseline):
     def update(self, obs: Observations) -> "BinnedMean":
         """Add rows to a model fitted in this process (its sums; cells may have been added)."""
         counts, expo, total_count, total_expo = self._sums
-        n_cells, n_bins = self.cells.n_cells, counts.shape[1]
+        n_cells = self.cells.n_cells
         counts, expo = (np.pad(a, ((0, n_cells - a.shape[0]), (0, 0))) for a in (counts, expo))
         cell = self._cell_index(obs.x, obs.y)
         ok = cell >= 0

@@ -31,8 +31,8 @@ from traffic_gp.learning import Learner
 from traffic_gp.observations import Observations, aggregate_view, hours_since_monday
 from traffic_gp.params import TrafficServerParams
 from traffic_gp.posterior import PosteriorSnapshot
-from traffic_gp.quick import BaselineForecast
 from traffic_gp.queries import CrowdQueries
+from traffic_gp.quick import BaselineForecast
 from traffic_gp.srv import PredictCount, PredictCountResponse, PredictRegion, PredictRegionResponse
 
 PEOPLE_COUNT_TYPE = "robot_common/PeopleCount"

@@ -12,11 +12,12 @@ rows' times fall at different minutes of the hour, and left out for counts taken
 (it cannot be seen in them).
 Search (coordinate-wise, so about 4-6 candidates instead of the 24 combinations): the profiles
 with the first likelihood, spatial input and the daily kernel; from the best of those the other
-likelihood; from the best then the other spatial input; from the best then the weekly kernel. Each candidate is a short fit
-(`screen_inducing` inducing points, at most `screen_steps` steps, at most `screen_rows`
-fitting rows, a sample stratified by place and hour of the day: `stratified_sample`) with early stopping on the held-out rows, scored by the held-out log predictive
-density with its best interval width (`calibration.best_log_density`: candidates compete on
-their forecasts, not on their noise models), among the candidates whose held-out RMSE of the
+likelihood; from the best then the other spatial input; from the best then the weekly kernel.
+Each candidate is a short fit (`screen_inducing` inducing points, at most `screen_steps` steps,
+at most `screen_rows` fitting rows, a sample stratified by place and hour of the day:
+`stratified_sample`) with early stopping on the held-out rows, scored by the held-out log
+predictive density with its best interval width (`calibration.best_log_density`: candidates
+compete on their forecasts, not on their noise models), among the candidates whose held-out RMSE of the
 expected counts is within RMSE_SLACK of the least (the crowd map serves expected counts: a
 likelihood that fits the quiet hours' spread better while missing the busy hours' means is
 not chosen). The winner is then fitted once at full size.

@@ -19,10 +19,10 @@ good), and compares the four forecasts of those days:
     places they saw).
 Then the served forecast's interval width is calibrated on the held-out counts
 (`calibration.calibrate`: dispersion and extra latent variance for 90% intervals holding
-as near 90% of them as any width does). `refit` refits the baselines with their chosen settings on all rows (the
-held-out days too) once the choices are made. `Serving` keeps everything as plain arrays and
-a JSON-able report (`to_arrays`, `from_arrays`): a saved model serves the same after loading.
-NumPy only.
+as near 90% of them as any width does). `refit` refits the baselines with their chosen
+settings on all rows (the held-out days too) once the choices are made. `Serving` keeps
+everything as plain arrays and a JSON-able report (`to_arrays`, `from_arrays`): a saved model
+serves the same after loading. NumPy only.
 """
 from typing import Dict, Optional, Tuple
 
