@@ -23,6 +23,7 @@ sim:<map>: simulated robots, RMSE against the simulator's truth). Targets: first
 85-95%. Writes artifacts/bench/traffic_online.json and prints a markdown table.
 
   python bench/traffic_gp/traffic_online.py [--sets akl,sim:generated:0] [--sizes 10000,40000,80000]
+      [--out-name NAME]
 """
 import argparse
 import os
@@ -116,6 +117,7 @@ def main(argv=None) -> int:
     parser.add_argument("--sets", default="akl", help="comma-separated: akl, sim:generated:0, "
                                                       "sim:<map .yaml>")
     parser.add_argument("--sizes", default="10000,40000,80000")
+    parser.add_argument("--out-name", default="traffic_online", help="JSON file name")
     args = parser.parse_args(argv)
     sizes = [int(v) for v in args.sizes.split(",") if v]
     print(f"traffic_online: {tc.machine_note()}", flush=True)
@@ -128,7 +130,7 @@ def main(argv=None) -> int:
         results[label] = {}
         for n in sizes:
             results[label][str(n)] = run_size(data, n)
-            tc.write_json("traffic_online", {"sets": results, "table": table(results)})
+            tc.write_json(args.out_name, {"sets": results, "table": table(results)})
     print("\n" + table(results))
     return 0
 
