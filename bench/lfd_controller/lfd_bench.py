@@ -74,15 +74,20 @@ def person_seed(family, scenario, role):
 
 
 def summary(episodes, scenario):
+    """Success and collision rates, median time of the successful drives, and the closest
+    approach to the obstacle (m beyond touching) over all drives (its minimum and median)."""
     times = [e["time"] for e in episodes if e["success"]]
+    closest = [e["closest"] for e in episodes if e.get("closest") is not None]
     return {"runs": len(episodes), "success": float(np.mean([e["success"] for e in episodes])),
             "collided": float(np.mean([e["collided"] for e in episodes])),
-            "median_time": float(np.median(times)) if times else float("nan")}
+            "median_time": float(np.median(times)) if times else float("nan"),
+            "closest_min": float(min(closest)) if closest else float("nan"),
+            "closest_median": float(np.median(closest)) if closest else float("nan")}
 
 
 def episode_record(result):
     return {"success": bool(result.success), "collided": bool(result.collided),
-            "time": float(result.times[-1])}
+            "time": float(result.times[-1]), "closest": float(result.min_clearance)}
 
 
 def drive_controller(reward, scenario, starts, desc, settings, cycles=None, budget=None):
@@ -117,7 +122,7 @@ def drive_clone(clone, scenario, starts):
 def drive_person(family, seed, scenario, starts):
     person = make_person(family, seed).person
     driver = make_person(family, seed + 500, person=person)
-    return [{k: r[k] for k in ("success", "collided", "time")}
+    return [{k: r[k] for k in ("success", "collided", "time", "closest")}
             for r in (driver.success(scenario, s) for s in starts)]
 
 
@@ -281,6 +286,25 @@ def test_row(family, name, choice, runs):
     return row
 
 
+def add_room(path):
+    """Rows written before the closest approach was recorded: drive the row's served reward again
+    with the budget from the same starts (and the person) for the closest approach only."""
+    row = json.loads(path.read_text())
+    if "closest_min" in row["budget"] or not row["demos"]:
+        return row
+    scenario = scenario_named(row["scenario"])
+    folder, source = OUT / "learned", row["learned_on"]
+    reward = load_reward(folder / f"{row['family']}__{source}.yaml")
+    starts = scenario.sample_starts(row["runs"], seed=TEST_SEED)
+    episodes, _ = drive_controller(reward, scenario, starts, f"room {row['family']}/{row['scenario']}",
+                                   row["learn"]["driving"], None, 0.1)
+    person = drive_person(row["family"], person_seed(row["family"], source, "test"), scenario, starts)
+    row["room"] = {"budget": summary(episodes, scenario), "person": summary(person, scenario),
+                   "note": "re-driven for the closest approach (same reward, starts and budget)"}
+    write(path, row)
+    return row
+
+
 TARGETS = ("success_90", "no_collisions", "time_1.3x", "clone_plus_10")
 
 
@@ -343,6 +367,17 @@ def table(rows):
           f"four targets: {met}/{len(judged)}")
     print(f"refused rows: {len(refused)} of {len(rows)} ({len(learned)} rewards learned); refusals "
           f"that would have failed if driven: {sum(would_fail(r) for r in refused)}/{len(refused)}")
+    for r in rows:      # the room kept around a moving obstacle: the controller's vs the person's
+        if r["scenario"] == "static_obstacle" or r["scenario"] == "layout_offset_goal" or not r["demos"]:
+            continue
+        room = r["budget"] if "closest_min" in r["budget"] else r.get("room", {}).get("budget")
+        person = r["person"] if "closest_min" in r["person"] else r.get("room", {}).get("person")
+        shown = (r["learn"].get("acceptance") or {}).get("demonstrated", {}).get("closest_min")
+        if room and person:
+            print(f"room {r['family']}/{r['scenario']}: closest approach min {room['closest_min']:.2f} m, "
+                  f"median {room['closest_median']:.2f} m (the person on these starts: min "
+                  f"{person['closest_min']:.2f}, median {person['closest_median']:.2f} m; "
+                  f"in the demonstrations: min {shown if shown is None else round(shown, 2)} m)")
     families = sorted({r["family"] for r in rows})
     success = {f: [r["controller"]["success"] for r in rows if r["family"] == f] for f in families}
     worst = min(families, key=lambda f: (min(success[f]), np.mean(success[f])))
@@ -365,7 +400,8 @@ def table(rows):
 def main(argv=None) -> int:
     global OUT, DEMOS, VALIDATION_STARTS
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--phase", choices=["validate", "test", "table", "all"], default="all")
+    parser.add_argument("--phase", choices=["validate", "test", "table", "all", "room"], default="all",
+                        help="room: add the closest approach to rows written without it")
     parser.add_argument("--families", nargs="*", choices=sorted(FAMILIES),
                         help="the families whose rows this process computes (default: all)")
     parser.add_argument("--scenarios", nargs="*", choices=SCENARIOS + LAYOUTS, default=SCENARIOS + LAYOUTS,
@@ -406,6 +442,11 @@ def main(argv=None) -> int:
                       f"(chosen on {', '.join(f for f in sorted(FAMILIES) if f != family)})", flush=True)
             for name in args.scenarios:
                 test_row(family, name, choice, args.runs)
+    if args.phase == "room":
+        for path in sorted((OUT / "rows").glob("*.json")):
+            if any(path.name.startswith(f + "__") for f in families) and any(
+                    path.stem.endswith("__" + n) for n in args.scenarios):
+                add_room(path)
     if args.phase in ("table", "all"):
         rows = [json.loads(p.read_text()) for p in sorted((OUT / "rows").glob("*.json"))]
         rows.sort(key=lambda r: (r["family"], (SCENARIOS + LAYOUTS).index(r["scenario"])))
