@@ -4,6 +4,8 @@ import os
 import resource
 from collections import defaultdict
 
+import pytest
+
 pytest_plugins = ["ros_harness.pytest_plugin"]
 
 CPU_REPORT_FILES = 25
@@ -24,13 +26,16 @@ def pytest_collection_finish(session):
     _last_cpu[0] = _cpu_seconds()   # collection (imports) is not any test file's
 
 
+@pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item, call):
     # The CPU since the previous report of this process: setup, call and teardown in turn, so a
     # module fixture's cost lands on the test that set it up or tore it down.
+    outcome = yield
     now = _cpu_seconds()
     spent = 0.0 if _last_cpu[0] is None else now - _last_cpu[0]
     _last_cpu[0] = now
-    item.user_properties.append(("cpu_seconds", spent))
+    report = outcome.get_result()
+    report.user_properties = list(report.user_properties) + [("cpu_seconds", spent)]
 
 
 def pytest_runtest_logreport(report):

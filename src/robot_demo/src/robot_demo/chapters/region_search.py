@@ -50,8 +50,12 @@ def run(demo) -> None:
         ranked = ", ".join(f"{label} {score:.2f} ({pose.position.x:.1f}, {pose.position.y:.1f})"
                            for label, score, pose in zip(response.labels, response.scores,
                                                          response.poses))
-        print(f"  {phrase!r:30s} -> {ranked if response.matched else response.message}   "
-              f"[{took:.1f} ms]")
+        if not response.matched:
+            ranked = response.message
+        elif response.confidence == response.confidence:      # NaN: no calibration shipped
+            unsure = ", not sure" if response.message.startswith("not sure") else ""
+            ranked += f"  (confidence {response.confidence:.2f}{unsure})"
+        print(f"  {phrase!r:30s} -> {ranked}   [{took:.1f} ms]")
         if response.fallbacks:
             print(f"  {'':30s}    out of vocabulary: {'; '.join(response.fallbacks)}")
     first = recommend(phrase=PHRASES[0], top_k=1)
