@@ -16,7 +16,8 @@ description offset, the no-match threshold) and scoring them on another.
 - `choose_sources`: whether to use WordNet's definitions and compounds (OPTIONAL_SOURCES), by an
   inner leave-one-building-out on the training buildings.
 - `choose_offset`: the description offset (from a fixed grid, ties: the larger, the safer) that
-  answers most training phrases right with their labels' descriptions.
+  answers most training phrases right with their labels' descriptions, among those with which
+  no training building answers fewer right with descriptions than without.
 `Scored` holds one phrase's evidence; `evaluate` gives top-1 and no-match figures.
 """
 from dataclasses import dataclass
@@ -102,6 +103,8 @@ def _answers(items, weights, descriptions):
         s = scores(item, weights, descriptions)
         top = int(np.argmax(s))
         lead, gap = lead_and_gap(s)
+        if descriptions and item.described is not None:  # as PlaceRecommender.recommend
+            lead = max(lead, lead_and_gap(scores(item, weights, False))[0])
         top3 = set(np.argsort(-s)[:3].tolist())
         out.append((lead, bool(item.expected), top in item.expected, gap,
                     bool(top3 & set(item.expected))))
@@ -161,11 +164,20 @@ def fit_confidence(items: Sequence[Scored], weights: RankingWeights,
 
 
 def choose_offset(items: Sequence[Scored], weights: RankingWeights) -> float:
-    """The description offset answering most phrases right with descriptions (ties: larger)."""
+    """The description offset answering most phrases right with descriptions (ties: larger),
+    among the offsets with which no training building answers fewer phrases right with its
+    descriptions than without (the largest offset when none qualifies)."""
+    buildings = list(dict.fromkeys(i.building for i in items))
+    without = {b: _right(_answers([i for i in items if i.building == b], weights, False),
+                         weights.no_match_margin) for b in buildings}
     best, chosen = -1, OFFSETS[-1]
     for offset in OFFSETS:
         trial = RankingWeights(weights.weights, offset, weights.no_match_margin)
-        right = _right(_answers(items, trial, descriptions=True), weights.no_match_margin)
+        per_building = {b: _right(_answers([i for i in items if i.building == b], trial, True),
+                                  weights.no_match_margin) for b in buildings}
+        if any(per_building[b] < without[b] for b in buildings):
+            continue
+        right = sum(per_building.values())
         if right >= best:
             best, chosen = right, offset
     return chosen

@@ -199,10 +199,17 @@ def test_the_default_sentence_backend_ranks_phrases_through_the_services(roslaun
     assert "word pieces 'printer' + '##z'" in typo.fallbacks[0]
     empty = recommend(phrase=" ", top_k=1)
     assert not empty.success and "has no words" in empty.message
-    # A place the building has no label for: no forced top-1 (the building has no garage)
+    # A place the building has no label for (it has no garage): never a confident answer; either
+    # "no labelled place matches" or the ranked places as a best guess, "not sure"
     nothing = recommend(phrase="the parking garage", top_k=3)
-    assert nothing.success and not nothing.matched and list(nothing.labels) == []
-    assert nothing.message.startswith("no labelled place matches 'the parking garage' (closest: ")
+    assert nothing.success and nothing.confidence < 0.5, nothing
+    if nothing.matched:
+        assert nothing.message.startswith("not sure (confidence ") and len(nothing.labels) == 3
+    else:
+        assert list(nothing.labels) == [] and nothing.message.startswith(
+            "no labelled place matches 'the parking garage' (closest: ")
+    sure = recommend(phrase="take the lift", top_k=3)
+    assert sure.confidence > nothing.confidence and not sure.message.startswith("not sure")
     embed = rospy_node.ServiceProxy("/embedding_server/embed", Embed)(
         phrases=["water fountain", "drinking fountain", "elevator"])
     assert embed.success and embed.dimension == 384 and embed.backend == "sentence"

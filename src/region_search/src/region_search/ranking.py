@@ -427,6 +427,8 @@ class PlaceRecommender:
                                                                            r.name))
         best = float(by_name[ranked[0].name]) if ranked else float("-inf")
         lead, gap = lead_and_gap(scores)
+        if evidence.described is not None:  # a description never causes a "no match"
+            lead = max(lead, lead_and_gap(self.scores(evidence, descriptions=False))[0])
         matched = bool(ranked) and lead >= self.weights.no_match_margin
         confidence = self.weights.confidence_of(lead, gap) if ranked else 0.0
         shown = ranked if top_k <= 0 else ranked[:top_k]
