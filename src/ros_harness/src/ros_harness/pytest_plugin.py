@@ -13,8 +13,9 @@ Fixtures (all tear down what they started, by process id):
 - `own_couchdb_server`, `own_mongodb_server`, `own_db_server` (function; the last parametrised):
   a private server that the test may stop and restart (outage tests).
 - `apache_couchdb` (session): a real Apache CouchDB 3 node from ../shared/couchdb or
-  $SHARED_COUCHDB_DIR (skipped with the reason where that folder is absent); `apache_couchdb_url` (function): a fresh database on it,
-  created by the admin, as the URL of its *member* account;
+  $SHARED_COUCHDB_DIR (skipped with the reason where that folder is absent);
+  `apache_couchdb_url` (function): a fresh database on it, created by the admin, as the URL of
+  its *member* account;
   `couch_server` (parametrised "pouchdb", "apache"): the shared server of each kind (both have
   `.url` for the test's own requests and `.database_url(name)` for the product);
   `couchdb_cluster` (function): a real 3-node cluster the test may kill nodes of and restart.
