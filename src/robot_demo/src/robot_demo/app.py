@@ -13,7 +13,7 @@ import signal
 import socket
 import time
 from pathlib import Path
-from typing import List, Optional, Type, TypeVar
+from typing import List, Optional, Tuple, Type, TypeVar
 
 import rospkg
 import rospy
@@ -112,10 +112,9 @@ def main(argv: Optional[List[str]] = None) -> int:
     failed, times = [], {}
     try:
         for name in args.only or CHAPTERS:
-            chapter_start = time.monotonic()
-            if not _run_chapter(name, demo):
+            succeeded, times[name] = _run_chapter(name, demo)
+            if not succeeded:
                 failed.append(name)
-            times[name] = time.monotonic() - chapter_start
         say("\nchapter times: " + ", ".join(f"{name} {seconds:.0f} s" for name, seconds in times.items())
             + f" (setting up roscore and the database: {chapters_start - started:.0f} s)")
         if args.keep_running:
@@ -130,8 +129,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     return 1 if failed else 0
 
 
-def _run_chapter(name: str, demo: Demo) -> bool:
-    """Run one chapter; False (and the error printed) when it failed."""
+def _run_chapter(name: str, demo: Demo) -> Tuple[bool, float]:
+    """Run one chapter: (False when it failed, the error printed; its seconds)."""
     chapter = CHAPTERS[name]
     say(f"\n=== {chapter.TITLE} ===")
     chapter_start = time.monotonic()
@@ -141,8 +140,9 @@ def _run_chapter(name: str, demo: Demo) -> bool:
     except Exception as err:  # noqa: BLE001 - report the chapter, go on with the others
         succeeded = False
         say(f"FAILED: {name}: {type(err).__name__}: {err}")
-    say(f"({name}: {time.monotonic() - chapter_start:.1f} s)")
-    return succeeded
+    seconds = time.monotonic() - chapter_start
+    say(f"({name}: {seconds:.1f} s)")
+    return succeeded, seconds
 
 
 def keep_running(demo: Demo, with_rviz: bool) -> None:

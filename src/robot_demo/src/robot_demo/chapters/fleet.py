@@ -164,8 +164,9 @@ def run(demo) -> None:
         recorded = waits.wait_until(all_central, 240, "every robot's spool drained and every count central",
                                     interval=1.0)
         print("  every message central, exactly once (robot: received by its recorder = central):")
+        central_counts = people_counts(central_url)
         for robot_id, count in recorded.items():
-            print(f"    {robot_id}: {count} = {people_counts(central_url)[robot_id]}")
+            print(f"    {robot_id}: {count} = {central_counts[robot_id]}")
 
         def learned_all():
             ok, text = call_trigger(central_core, "/traffic_gp/status")
