@@ -11,6 +11,7 @@ pytest_plugins = ["ros_harness.pytest_plugin"]
 CPU_REPORT_FILES = 25
 _last_cpu = [None]
 _cpu_by_file = defaultdict(float)
+_worker_cpu = []        # (whole worker process, its test files): from each pytest-xdist worker
 
 
 def _cpu_seconds() -> float:
@@ -20,6 +21,11 @@ def _cpu_seconds() -> float:
         usage = resource.getrusage(who)
         total += usage.ru_utime + usage.ru_stime
     return total
+
+
+def _own_cpu_seconds() -> float:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
 
 
 def pytest_collection_finish(session):
@@ -44,6 +50,20 @@ def pytest_runtest_logreport(report):
             _cpu_by_file[report.nodeid.split("::")[0]] += value
 
 
+def pytest_sessionfinish(session):
+    workeroutput = getattr(session.config, "workeroutput", None)
+    if workeroutput is not None:    # a pytest-xdist worker: its whole CPU goes to the controller
+        workeroutput["cpu_seconds"] = _cpu_seconds()
+        workeroutput["cpu_in_files"] = sum(_cpu_by_file.values())
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node, error):
+    output = getattr(node, "workeroutput", {})
+    if "cpu_seconds" in output:
+        _worker_cpu.append((output["cpu_seconds"], output["cpu_in_files"]))
+
+
 def pytest_terminal_summary(terminalreporter):
     if not _cpu_by_file or os.environ.get("PYTEST_XDIST_WORKER"):
         return
@@ -52,3 +72,9 @@ def pytest_terminal_summary(terminalreporter):
                                     f"{total / 60:.1f} CPU-min)")
     for path, seconds in sorted(_cpu_by_file.items(), key=lambda kv: -kv[1])[:CPU_REPORT_FILES]:
         terminalreporter.write_line(f"{seconds:8.1f} s  {path}")
+    if _worker_cpu:
+        whole = sum(w for w, _ in _worker_cpu)
+        outside = whole - sum(f for _, f in _worker_cpu)
+        terminalreporter.write_line(
+            f"{len(_worker_cpu)} workers: {whole / 60:.1f} CPU-min in all, {outside:.1f} s of it "
+            f"outside the test files (start-up, collection); the controller: {_own_cpu_seconds():.1f} s")
