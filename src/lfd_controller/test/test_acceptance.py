@@ -111,10 +111,11 @@ def test_a_safe_controller_is_not_refused_for_one_missed_drive(demos):
             controller.act = lambda state, t, task: np.zeros(2)
         return controller
 
-    _, report = calibrate(reward_of(BRISK), demos, unlucky_first, rounds=1, nearby=4, replan_every=4)
-    # 2 demonstrated + 8 nearby starts; the one standing drive is the only miss
-    assert report.drives == 10 and report.starts == {"demonstrated": 2, "nearby": 8}
-    assert report.driven["reached"] == pytest.approx(0.9), report.describe()
+    _, report = calibrate(reward_of(BRISK), demos, unlucky_first, rounds=1, nearby=2, replan_every=4)
+    # 2 demonstrated + 4 nearby starts; the one standing drive is the only miss (5 of 6 reach:
+    # above the 80 % a refusal needs)
+    assert report.drives == 6 and report.starts == {"demonstrated": 2, "nearby": 4}
+    assert report.driven["reached"] == pytest.approx(5 / 6), report.describe()
     assert report.driven["collided"] == 0.0
     assert report.accepted and not any(report.failures.values()), report.describe()
 
@@ -138,7 +139,9 @@ def test_a_controller_that_cuts_closer_to_a_moving_obstacle_than_the_person_is_n
 
 def test_a_reward_that_crawls_is_refused_and_calibration_brings_it_to_the_persons_pace(demos):
     crawl = reward_of(CRAWL)
-    # replanning every 0.4 s (one planning step) and no nearby starts keep the test short
+    # replanning every 0.4 s (one planning step), one demonstration and no nearby starts keep the
+    # test short
+    demos = demos[:1]
     _, refused = calibrate(crawl, demos, unbudgeted, rounds=1, nearby=0, replan_every=4)
     assert not refused.accepted and refused.failures["crawl"] and not refused.matched["mean_speed"]
     assert refused.driven["mean_speed"] < 0.8 * refused.demonstrated["mean_speed"]
@@ -156,6 +159,7 @@ def test_a_reward_that_crawls_is_refused_and_calibration_brings_it_to_the_person
 
 def test_learn_and_save_does_not_save_a_refused_reward_and_warns_on_a_mismatch(demos, tmp_path):
     output = tmp_path / "reward.yaml"
+    demos = demos[:1]       # learned three times: one demonstration keeps each learning short
     # a demand no controller meets (5 x the person's speed, or it "crawls"): refused, nothing written
     strict = {"rounds": 1, "max_drives": 1, "nearby": 1, "verdict_options": {"crawl_speed": 5.0}}
     with pytest.raises(RewardNotAcceptedError, match="NOT saved.*crawls"):

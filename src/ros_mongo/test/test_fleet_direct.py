@@ -68,7 +68,7 @@ class DirectRobot(FleetRobot):
 @pytest.mark.db
 def test_direct_fleet_keeps_each_message_once_through_a_central_outage_and_a_robot_restart(
         tmp_path, workspace_root):
-    count, rate, hold = 300, 60.0, 100
+    count, rate, hold = 200, 60.0, 60
     central = PouchDBServer(tmp_path / "central").start()
     admin_url = central.database_url("fleet")
     assert requests.put(admin_url, timeout=30).status_code == 201  # the admin creates the database
@@ -83,8 +83,8 @@ def test_direct_fleet_keeps_each_message_once_through_a_central_outage_and_a_rob
         for robot in robots:
             robot.launch.wait_for_subscribers(["/odom", "/camera/rgb/image_raw"], timeout=LONG)
             robot.publish(count, rate, hold_at=hold)
-        wait_until(lambda: all(central_counts(admin_url).get(r.robot_id, 0) >= 40
-                               for r in robots), LONG, what="40 messages of each robot central")
+        wait_until(lambda: all(central_counts(admin_url).get(r.robot_id, 0) >= 30
+                               for r in robots), LONG, what="30 messages of each robot central")
 
         central.stop()  # the central outage: every robot spools
         for robot in robots:
@@ -147,7 +147,7 @@ def test_direct_fleet_on_a_real_couchdb_cluster_keeps_every_message_through_a_no
     database member; node 2 is killed (SIGKILL) while they publish, and started again: writes keep
     their quorum (2 of 3 copies), and every message is there once, read through each node. Then
     with two nodes down the server accepts writes below the quorum (202): still stored, each once."""
-    count, rate, hold = 300, 60.0, 100
+    count, rate, hold = 200, 60.0, 60
     cluster = couchdb_cluster
     cluster.create_database("fleet")
     user, password = cluster.member
@@ -161,8 +161,8 @@ def test_direct_fleet_on_a_real_couchdb_cluster_keeps_every_message_through_a_no
             robot.launch.wait_for_subscribers(["/odom", "/camera/rgb/image_raw"], timeout=LONG)
             robot.publish(count, rate, hold_at=hold)
         node1 = cluster.admin_database_url("fleet", node=0)
-        wait_until(lambda: all(central_counts(node1).get(r.robot_id, 0) >= 40 for r in robots), LONG,
-                   what="40 messages of each robot central")
+        wait_until(lambda: all(central_counts(node1).get(r.robot_id, 0) >= 30 for r in robots), LONG,
+                   what="30 messages of each robot central")
         cluster.kill_node(1)
         for robot in robots:
             robot.go_file.touch()  # the rest of the stream comes while node 2 is down

@@ -76,10 +76,14 @@ def test_database_outage_mid_stream_stores_each_message_once(roslaunch, own_db_s
     sender.close()
 
 
+# What a kill leaves is decided by the recorder's acknowledgement (stored or spooled), the same on
+# every server: run on pouchdb-server and nx-27017 (the recorder writing to Apache CouchDB as a
+# member: test_recorder_stores_all_types...).
+@pytest.mark.parametrize("db_server", ["pouchdb", "mongodb"], indirect=True)
 def test_sigkill_loses_only_unacknowledged_messages(roslaunch, db_url, tmp_path, diagnostics):
     launch = recorder(roslaunch, db_url, tmp_path, batch_period=0.2)
     sender = Sender(rate=400.0).connected().start(4000)
-    wait_until(lambda: diagnostics.count("stored") >= 400, 60, what="messages stored")
+    wait_until(lambda: diagnostics.count("stored") >= 200, 60, what="messages stored")
     acknowledged = diagnostics.count("stored") + diagnostics.count("spool_pending")
     os.kill(launch.node_pid(launch.node_name), signal.SIGKILL)
     sent = sender.sent
