@@ -1,5 +1,10 @@
 """Fixtures shared by the traffic_gp tests: one small simulated world and one GP fitted on it
-(session-scoped: every module that needs the fitted GP shares the one fit)."""
+(session-scoped: every module that needs the fitted GP shares the one fit; with pytest-xdist the
+first worker that needs it fits and saves it, the others load that file)."""
+import fcntl
+import os
+from contextlib import contextmanager
+
 import pytest
 
 from robot_sim import generate_building
@@ -18,6 +23,32 @@ def weekday_views(sim, per_day, days):
     return views
 
 
+@contextmanager
+def _locked(path):
+    """An exclusive lock on `path` (a file) across the processes of one pytest run."""
+    with open(path, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def shared_fit(tmp_path_factory, name: str, fit):
+    """`fit()` once per test run: in a single process as it is; under pytest-xdist the first
+    worker fits and saves the model (its own `save`), the other workers `TrafficGP.load` it."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return fit()
+    shared = tmp_path_factory.getbasetemp().parent          # the run's, common to the workers
+    path = shared / f"{name}.npz"
+    with _locked(shared / f"{name}.lock"):
+        if path.exists():
+            return TrafficGP.load(path)
+        model = fit()
+        model.save(path)
+        return model
+
+
 @pytest.fixture(scope="session")
 def small_world():
     """A two-room-per-side building in 1 m cells, two weeks of weekday views (rows merged per
@@ -29,9 +60,10 @@ def small_world():
 
 
 @pytest.fixture(scope="session")
-def fitted(small_world):
+def fitted(small_world, tmp_path_factory):
     """The GP with its serving (fallback, calibration) fitted on the small world's rows; its
     settings given, so no candidate search (test_selection covers the search)."""
     _, obs = small_world
-    return TrafficGP(n_inducing=80, n_steps=250, batch_size=512, likelihood="poisson",
-                     profile="none", refit_steps=50, random_state=0).fit(obs)
+    return shared_fit(tmp_path_factory, "traffic_gp_fitted", lambda: TrafficGP(
+        n_inducing=80, n_steps=250, batch_size=512, likelihood="poisson", profile="none",
+        refit_steps=50, random_state=0).fit(obs))

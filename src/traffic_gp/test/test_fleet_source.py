@@ -122,10 +122,13 @@ def test_learns_from_every_robot_through_central_and_resumes_after_a_restart(
         wait_until(lambda: central_people(central_url)[0] == wanted, LONG,
                    what="every robot's PeopleCount messages central")
 
+        # a small GP on x, y with a few online steps after new rows: what the model learns is
+        # the model tests' subject; here it is which rows reach it, and that a GP is saved
         def start_node():
             launch = roslaunch(str(LAUNCH), map_yaml=str(map_yaml), model_path=str(model_path),
                                min_rows=1, initial_steps=5, n_inducing=16, source="central",
-                               central_url=central_url, publish_period=60.0)
+                               central_url=central_url, publish_period=60.0,
+                               model="{spatial_inputs: xy, online_steps: 5}")
             launch.wait_for_services([f"{NODE}/status", f"{NODE}/save_model"], timeout=LONG)
             return launch
 

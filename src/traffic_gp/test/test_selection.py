@@ -9,8 +9,11 @@ from traffic_gp.persistence import read_header
 from traffic_gp.posterior import PosteriorSnapshot
 from traffic_gp.selection import hourly_cycle_visible, options, shortest_period
 
+# candidates screened for 20 steps each (eager steps, about 0.1 CPU-s apiece): the weekly profile
+# wins its screen by far more (held-out log density about -1.6 against -2.2) than such short
+# screens change
 SMALL = dict(n_inducing=20, n_steps=120, batch_size=256, eval_every=20, screen_inducing=12,
-             screen_steps=50, refit_steps=20, random_state=0)
+             screen_steps=20, refit_steps=20, random_state=0)
 
 
 def weekday_sensors(days: int = 21, seed: int = 0) -> Observations:

@@ -68,7 +68,9 @@ def test_cells_beside_a_wall_are_far_apart_in_the_embedding_and_near_through_a_d
 def trained():
     cells = corridor_and_rooms()
     obs = corridor_counts(cells)
-    common = dict(n_inducing=60, n_steps=300, batch_size=512, hourly=False, random_state=0,
+    # 120 steps: the corridor's rate is within 6 % of the truth, the geodesic model's share
+    # behind the wall about 2e-6 and the x, y model's above 1: far inside the margins below
+    common = dict(n_inducing=60, n_steps=120, batch_size=512, hourly=False, random_state=0,
                   likelihood="poisson", profile="none", fallback=False, calibrate=False)
     xy = TrafficGP(spatial_inputs="xy", **common).fit(obs, cells=cells)
     geodesic = TrafficGP(spatial_inputs="geodesic", **common).fit(obs, cells=cells)
