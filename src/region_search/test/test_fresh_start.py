@@ -31,6 +31,7 @@ RECOMMEND = "/region_recommender/recommend"
 # only there so that a hung server fails the test.
 TRAINING_TIMEOUT = 3600.0
 EPOCHS = 2
+POLL = 0.25  # s between checks of a condition (each a service call or a log read)
 
 # phrase -> the real label it means (by its name)
 CASES = [("room 321", "towne_321"), ("Towne 311", "towne_311"), ("the biology lab", "bio_lab"),
@@ -97,13 +98,15 @@ def test_word2vec_from_an_empty_cache_in_any_start_order_then_a_server_restart(
             r"embedding model still loading \(trained for \d+ s of about \d+ s, epoch \d+/\d+\)",
             response.message) else None
 
-    loading = wait_until(loading_answer, 900, what="'still loading (trained for N s of about M s)'")
+    loading = wait_until(loading_answer, 900, interval=POLL,
+                         what="'still loading (trained for N s of about M s)'")
     assert list(loading.labels) == []
     embed = rospy_node.ServiceProxy("/embedding_server/embed", Embed)(phrases=["robot"])
     assert not embed.success and embed.message.startswith("embedding model still loading (")
     wait_until(lambda: diagnostics.seen(DiagnosticStatus.WARN, "embedding model still loading"),
                120, what="a WARN /diagnostics status while the model trains")
     wait_until(lambda: "embedding model still loading (trained for" in server.log_tail(400), 120,
+               interval=POLL,
                what="the training progress in the embedding server's log")
 
     # 3. Trained (however long it takes): correct answers through the ROS service.
@@ -125,14 +128,16 @@ def test_word2vec_from_an_empty_cache_in_any_start_order_then_a_server_restart(
     # 4. The server goes away: the recommender says so; it comes back (warm): answers again.
     roslaunch.stop(server)
     gone = wait_until(lambda: (lambda r: r if not r.success else None)(
-        recommend(phrase="room 321", top_k=3)), 60, what="a failure while no server runs")
+        recommend(phrase="room 321", top_k=3)), 60, interval=POLL,
+        what="a failure while no server runs")
     assert gone.message.startswith("waiting for the embedding service /embedding_server/embed")
     server = roslaunch("region_search", "embedding_server.launch", backend="word2vec",
                        cache_dir=str(cache), epochs=str(EPOCHS))
-    wait_until(lambda: "(cached, ready in" in server.log_tail(400), 600,
+    wait_until(lambda: "(cached, ready in" in server.log_tail(400), 600, interval=POLL,
                what="the restarted server loading the cached model")
     again = wait_until(lambda: (lambda r: r if r.success else None)(
-        recommend(phrase="room 321", top_k=3)), 120, what="answers after the server restarted")
+        recommend(phrase="room 321", top_k=3)), 120, interval=POLL,
+        what="answers after the server restarted")
     assert list(again.labels) == first["room 321"]
     assert answers(recommend) == first
     assert list(cache.glob("word2vec-*/meta.json")) == trained  # not trained a second time

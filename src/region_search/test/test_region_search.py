@@ -63,7 +63,7 @@ SERVICES = ["/embedding_server/embed", "/embedding_server/similarity",
 def wait_for_model(rospy_node, timeout):
     """The services are advertised at once; the model is ready when ~active_backend is set."""
     wait_until(lambda: rospy_node.has_param("/embedding_server/active_backend"), timeout,
-               what="the embedding server's model to be ready (~active_backend set)")
+               interval=0.25, what="the embedding server's model to be ready (~active_backend set)")
 
 
 def start_region_search(roslaunch, rospy_node, files, **args):

@@ -74,6 +74,8 @@ __all__ = ["FEATURES", "RankingWeights", "load_ranking_weights", "DEFAULT_WEIGHT
            "specific_spelling", "lead_and_gap"]
 
 Embed = Callable[[List[str]], EmbeddedWords]
+# Label texts per embedding call when a label set is encoded (SentenceFeatures).
+ENCODE_CHUNK = 1024
 
 
 def specific_spelling(words: Sequence[str], name_words: Sequence[str],
@@ -193,34 +195,47 @@ class SentenceFeatures:
     def set_regions(self, regions: Sequence[Region]) -> None:
         """Encode the new or changed labels' texts, then publish the whole label set at once."""
         labels = _Labels.of(regions)
-        vectors = {}
-        for name in labels.names:
-            key = (name, labels.described[name])
-            if key not in self._cache:  # an embedding failure here publishes nothing
-                self._cache[key] = self._encode(name, key[1])
-            vectors[name] = self._cache[key]
+        new = [(n, labels.described[n]) for n in labels.names
+               if (n, labels.described[n]) not in self._cache]
+        self._cache.update(self._encode(new))  # an embedding failure here publishes nothing
+        vectors = {n: self._cache[(n, labels.described[n])] for n in labels.names}
         self._cache = {(n, labels.described[n]): vectors[n] for n in labels.names}
         self._state = (labels, vectors)
         self.labels.current = labels
 
-    def _encode(self, name: str, description: str) -> Dict[str, np.ndarray]:
-        """The vectors of one label's texts (name, knowledge, expanded, compounds, described)."""
+    def _texts(self, name: str, description: str) -> Dict[str, List[str]]:
+        """One label's texts (name, knowledge, expanded, compounds, described)."""
         texts = {"name": [" ".join(tokenize(name))],
                  "knowledge": [self.labels.knowledge_text(name)],
                  "expanded": [self.labels.expanded_text(name)],
                  "compounds": self.labels.compound_texts(name)}
         if description:
             texts["described"] = [f"{' '.join(tokenize(name))}, {description}"]
-        flat = [t for group in texts.values() for t in group]
-        vectors = np.asarray(self.embed_phrases(flat).vectors, dtype=np.float64)
-        if len(vectors) != len(flat):
-            raise EmbeddingError(f"{len(flat)} label texts gave {len(vectors)} vectors")
-        start, own = 0, {}
-        for key, group in texts.items():
-            own[key] = vectors[start:start + len(group)]
-            start += len(group)
-        own["compounds"] = _closest(own["compounds"], own["knowledge"][0], self.compound_keep)
-        return own
+        return texts
+
+    def _encode(self, keys: Sequence[Tuple[str, str]]) -> Dict[Tuple[str, str],
+                                                               Dict[str, np.ndarray]]:
+        """The vectors of the labels' texts: the distinct texts of all labels in few large
+        calls (the model pads less and is called less often than label by label)."""
+        texts = {key: self._texts(*key) for key in keys}
+        distinct = list(dict.fromkeys(t for groups in texts.values()
+                                      for group in groups.values() for t in group))
+        rows: Dict[str, np.ndarray] = {}
+        for start in range(0, len(distinct), ENCODE_CHUNK):
+            chunk = distinct[start:start + ENCODE_CHUNK]
+            vectors = np.asarray(self.embed_phrases(chunk).vectors, dtype=np.float64)
+            if len(vectors) != len(chunk):
+                raise EmbeddingError(f"{len(chunk)} label texts gave {len(vectors)} vectors")
+            rows.update(zip(chunk, vectors))
+        dimension = len(next(iter(rows.values()))) if rows else 0
+        encoded = {}
+        for key, groups in texts.items():
+            own = {kind: np.array([rows[t] for t in group]).reshape(len(group), dimension)
+                   for kind, group in groups.items()}
+            own["compounds"] = _closest(own["compounds"], own["knowledge"][0],
+                                        self.compound_keep)
+            encoded[key] = own
+        return encoded
 
     def evidence(self, phrase: str) -> QueryEvidence:
         labels, vectors = self._state  # one published label set for the whole phrase
