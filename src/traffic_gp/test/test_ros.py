@@ -49,8 +49,10 @@ def test_learns_from_simulated_robots_and_serves_a_crowd_costmap(roslaunch, rosp
     # the baselines are served at once; the GP's first fit runs in the background (the
     # hold-out, the baselines' comparison, the calibration), a small GP with its settings given
     # and short online rounds: the choice of settings and what each gives are the model tests'
-    # subject (test_selection), serving while the GP is chosen is the next test's
-    launch = roslaunch(str(CROWD_SIM), seed=0, time_scale=600, rate=10,
+    # subject (test_selection), serving while the GP is chosen is the next test's; 3 views a
+    # second (about 300 rows): the rows do not grow the 8 times that start a second choice of
+    # settings while the first fit runs
+    launch = roslaunch(str(CROWD_SIM), seed=0, time_scale=600, rate=3,
                        min_rows=1500, initial_steps=10, refit_growth=0, publish_period=1.0,
                        model_path=str(model_path), n_inducing=30,
                        model="{likelihood: poisson, profile: none, spatial_inputs: xy, "
@@ -117,9 +119,11 @@ def saved_model(tmp_path):
     """A tiny model trained here on simulated counts, and the building's map file."""
     building = generate_building(0)
     sim = PeopleSimulator.from_building(building, 0.5, seed=2)
-    obs = Observations.from_views(sim.cells, sim.observe(300, start=48.0, hours=24.0))
+    obs = Observations.from_views(sim.cells, sim.observe(60, start=48.0, hours=24.0))
+    # online_steps=5 (saved with the model): the node's training after loading is a few eager
+    # steps, enough to show that it continues from the file's state (more than 20 steps)
     model = TrafficGP(n_inducing=30, n_steps=20, batch_size=256, likelihood="negbin",
-                      profile="none", refit_steps=0).fit(obs)
+                      profile="none", refit_steps=0, online_steps=5).fit(obs)
     return model, model.save(tmp_path / "model.npz"), save_map(building.grid, tmp_path / "map.yaml")
 
 
