@@ -2,13 +2,24 @@
 and real database servers (pouchdb-server for CouchDB, nx-27017 for MongoDB)."""
 import json
 import math
+import signal
+import sys
 import urllib.request
 import uuid
 from io import BytesIO
 
 import pytest
 
-from ros_harness import HarnessError, LaunchSet, ProcessDied, RosLaunch, http_get_json, master_graph
+from ros_harness import (
+    HarnessError,
+    LaunchSet,
+    ManagedProcess,
+    ProcessDied,
+    RosLaunch,
+    http_get_json,
+    master_graph,
+    wait_until,
+)
 
 
 def test_generated_message_class_imports_and_round_trips():
@@ -156,3 +167,19 @@ def test_the_real_couchdb_is_skipped_with_its_reason_where_the_shared_folder_is_
     assert "couchdb-node.sh is missing" in reason and "../shared/couchdb" in reason
     with pytest.raises(HarnessError, match="is missing"):
         ApacheCouchDB(tmp_path / "shared" / "couchdb", tmp_path / "work").start()
+
+
+def test_a_process_stops_on_sigint_even_when_the_suite_started_with_sigint_ignored(tmp_path):
+    # A background job of a non-interactive shell (`make test &` in a script) ignores SIGINT, and
+    # children inherit that: stop() would wait its whole timeout and then SIGKILL.
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        child = ManagedProcess([sys.executable, "-c", "import time; print('up', flush=True); "
+                                "time.sleep(600)"], name="sleeper", log_path=tmp_path / "s.log")
+        child.start()
+        wait_until(lambda: "up" in child.log_tail(), 120, what="the child started")
+        status = child.stop(timeout=120)
+    finally:
+        signal.signal(signal.SIGINT, before)
+    assert status != -signal.SIGKILL, child.log_tail()
+    assert "KeyboardInterrupt" in child.log_tail()

@@ -14,6 +14,7 @@ import signal
 import socket
 import subprocess
 import tempfile
+import threading
 import time
 import urllib.error
 import urllib.request
@@ -82,6 +83,15 @@ def wait_until(condition: Callable[[], object], timeout: float, *, interval: flo
         interval = min(interval * 1.5, 0.5)
 
 
+def _let_children_hear_sigint() -> None:
+    """A background job of a non-interactive shell starts with SIGINT ignored, and children
+    inherit an ignored signal: every stop() would then wait its whole timeout before SIGKILL.
+    Python's own handler is reset to the default on exec, so installing it fixes the children."""
+    if (signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+            and threading.current_thread() is threading.main_thread()):
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 class ManagedProcess:
     """A child process in its own session with its output in a log file."""
 
@@ -98,6 +108,7 @@ class ManagedProcess:
         if self.alive:
             raise HarnessError(f"{self.name} is already running (pid {self.pid})")
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
+        _let_children_hear_sigint()
         with open(self.log_path, "ab") as log:
             self.popen = subprocess.Popen(self.argv, stdout=log, stderr=subprocess.STDOUT,
                                           stdin=subprocess.DEVNULL, env=self.env, cwd=self.cwd,
