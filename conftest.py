@@ -12,6 +12,8 @@ CPU_REPORT_FILES = 25
 _last_cpu = [None]
 _cpu_by_file = defaultdict(float)
 _worker_cpu = []        # (whole worker process, its test files): from each pytest-xdist worker
+_last_teardown = [False]
+SESSION_TEARDOWN = "(session fixtures stopped at the end: servers, roscore, Xvfb)"
 
 
 def _cpu_seconds() -> float:
@@ -33,6 +35,14 @@ def pytest_collection_finish(session):
 
 
 @pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_teardown(item, nextitem):
+    # the last teardown of a process also stops the session-scoped servers: their whole CPU would
+    # otherwise land on whichever test file happened to run last
+    _last_teardown[0] = nextitem is None
+    yield
+
+
+@pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item, call):
     # The CPU since the previous report of this process: setup, call and teardown in turn, so a
     # module fixture's cost lands on the test that set it up or tore it down.
@@ -41,13 +51,18 @@ def pytest_runtest_makereport(item, call):
     spent = 0.0 if _last_cpu[0] is None else now - _last_cpu[0]
     _last_cpu[0] = now
     report = outcome.get_result()
-    report.user_properties = list(report.user_properties) + [("cpu_seconds", spent)]
+    key = "cpu_seconds"
+    if call.when == "teardown" and _last_teardown[0]:
+        key = "cpu_seconds_session_teardown"
+    report.user_properties = list(report.user_properties) + [(key, spent)]
 
 
 def pytest_runtest_logreport(report):
     for key, value in getattr(report, "user_properties", ()):
         if key == "cpu_seconds":
             _cpu_by_file[report.nodeid.split("::")[0]] += value
+        elif key == "cpu_seconds_session_teardown":
+            _cpu_by_file[SESSION_TEARDOWN] += value
 
 
 def pytest_sessionfinish(session):
