@@ -9,6 +9,13 @@
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 workers="${TEST_WORKERS:-3}"
+# Several test processes, and the nodes they start, share the cores: one math thread each keeps
+# TensorFlow's, PyTorch's and BLAS's thread pools from spinning against each other (about a tenth
+# of the TensorFlow tests' CPU). Set any of them to override.
+for name in OMP_NUM_THREADS MKL_NUM_THREADS OPENBLAS_NUM_THREADS TF_NUM_INTRAOP_THREADS \
+    TF_NUM_INTEROP_THREADS; do
+  export "$name=${!name:-1}"
+done
 parallel=()
 if [ "$workers" != "0" ]; then
   parallel=(-n "$workers" --dist loadfile)
