@@ -16,18 +16,14 @@ _last_teardown = [False]
 SESSION_TEARDOWN = "(session fixtures stopped at the end: servers, roscore, Xvfb)"
 
 
-def _cpu_seconds() -> float:
-    """user+sys of this process and of its children that have ended (roslaunch, servers, ...)."""
+def _cpu_seconds(children: bool = True) -> float:
+    """user+sys of this process and (`children`) of its children that have ended (roslaunch,
+    servers, ...)."""
     total = 0.0
-    for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN):
+    for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)[:2 if children else 1]:
         usage = resource.getrusage(who)
         total += usage.ru_utime + usage.ru_stime
     return total
-
-
-def _own_cpu_seconds() -> float:
-    usage = resource.getrusage(resource.RUSAGE_SELF)
-    return usage.ru_utime + usage.ru_stime
 
 
 def pytest_collection_finish(session):
@@ -90,6 +86,7 @@ def pytest_terminal_summary(terminalreporter):
     if _worker_cpu:
         whole = sum(w for w, _ in _worker_cpu)
         outside = whole - sum(f for _, f in _worker_cpu)
+        controller = _cpu_seconds(children=False)
         terminalreporter.write_line(
             f"{len(_worker_cpu)} workers: {whole / 60:.1f} CPU-min in all, {outside:.1f} s of it "
-            f"outside the test files (start-up, collection); the controller: {_own_cpu_seconds():.1f} s")
+            f"outside the test files (start-up, collection); the controller: {controller:.1f} s")
