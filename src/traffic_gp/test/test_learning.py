@@ -52,8 +52,14 @@ def test_rows_of_a_new_robot_are_served_while_the_gp_is_still_being_fitted(cells
     learned = []
     assert not learner.add(rows_of("r1", cells, 0, 10.0, 1, n=20), cells, lambda: None)
     assert learner.model is None, "fewer than min_rows: nothing served, the caller keeps them"
-    assert learner.add(rows_of("r1", cells, 0, 10.0, 1), cells, lambda: learned.append("r1"))
-    assert isinstance(learner.model, BaselineForecast) and learned == ["r1"]
+    # `commit` runs under the lock the services answer under: what an answer sees the moment the
+    # baselines are served must already say that the GP is being chosen, not "no GP yet"
+    assert learner.add(rows_of("r1", cells, 0, 10.0, 1), cells,
+                       lambda: learned.append(("r1", learner.describe())))
+    assert isinstance(learner.model, BaselineForecast) and len(learned) == 1
+    assert learned[0][1].startswith("serving the baselines while the GP is selected and fitted; "
+                                    "choosing the GP's settings and fitting it"), learned[0]
+    learned[0] = "r1"
     with learner.lock:
         assert "serving the baselines while the GP is selected and fitted" in learner.describe()
     assert "not the GP" in learner.model.status()

@@ -89,11 +89,12 @@ class Learner:
             if len(rows) < self.min_rows:
                 return False
             quick = BaselineForecast().fit(rows, cells)
+            # the job first: no answer may see the baselines served without the GP's job
+            self._start("select", rows, cells)
             with self.lock:
                 self.model = quick
                 commit()
             log.info("serving the baselines at once: %s", quick.status())
-            self._start("select", rows, cells)
             return True
         if isinstance(self.model, PosteriorSnapshot):     # first new rows after loading a file
             trainable = TrafficGP.load(self.model.path)
@@ -162,18 +163,18 @@ class Learner:
                                        warm_start=warm)
 
     def _finish(self) -> None:
-        job, self.job = self.job, None
+        job = self.job
         if job.error is not None:
             self.note = (f"{WHAT[job.kind]} failed ({type(job.error).__name__}: {job.error}); "
                          f"tried again once the rows have doubled")
+            self.job = None           # after the note: the status never reads "no GP yet"
             log.error("traffic_gp: %s", self.note)
             return
         model = job.result
         if job.later:
             model.partial_fit(Observations.concat(job.later), n_steps=0)    # not served yet
         with self.lock:
-            self.model = model
-        self.note = ""
+            self.model, self.job, self.note = model, None, ""
         log.info("traffic_gp: the GP fitted in %.0f s now serves: %s",
                  time.monotonic() - job.started, model.status())
 
