@@ -70,6 +70,19 @@ def run_node(node_name: str, start: Callable[[], object], *, loggers: Iterable[s
     return 0
 
 
+
+def shut_down_rospy(reason: str) -> None:
+    """`rospy.signal_shutdown(reason)` for a process that goes on afterwards (a test worker, the
+    demo while it stops its launches). rospy's shutdown closes its XML-RPC server's socket but
+    leaves the server's `serve_forever` polling the closed socket: that thread then keeps a core
+    busy until the process exits. Asking `serve_forever` to return as well ends the thread."""
+    servers = [getattr(hook, "__self__", None) for hook in rospy.core._shutdown_hooks]
+    servers = [node.server for node in servers if getattr(node, "server", None) is not None]
+    rospy.signal_shutdown(reason)
+    for server in servers:
+        # what BaseServer.shutdown() sets, without its wait: the loop returns on its next poll
+        server._BaseServer__shutdown_request = True
+
 def odom_state(msg) -> list:
     """(px, py, yaw, v, w) from a nav_msgs/Odometry."""
     pose, twist = msg.pose.pose, msg.twist.twist

@@ -19,6 +19,7 @@ import rospkg
 import rospy
 
 from robot_common.params import NodeConfig
+from robot_common.ros_node import shut_down_rospy
 from robot_demo.chapters import (
     crowd_map,
     data_api,
@@ -120,7 +121,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         if args.keep_running:
             keep_running(demo, args.rviz)
     finally:
-        rospy.signal_shutdown("demo finished")
+        shut_down_rospy("demo finished")
         demo.stop_all()
         db_server.stop()
         core.stop()

@@ -87,9 +87,12 @@ def roscore(tmp_path_factory):
 def rospy_node(roscore):
     import rospy
 
+    from robot_common.ros_node import shut_down_rospy
+
     rospy.init_node("pytest_client", anonymous=True, disable_signals=True)
     yield rospy
-    rospy.signal_shutdown("tests finished")
+    # a pytest-xdist worker waits for the others after this: nothing may keep spinning
+    shut_down_rospy("tests finished")
 
 
 @pytest.fixture
