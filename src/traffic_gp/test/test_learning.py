@@ -49,17 +49,21 @@ def finish(learner, cells):
 def test_rows_of_a_new_robot_are_served_while_the_gp_is_still_being_fitted(cells):
     learner = GatedLearner(PARAMS, min_rows=40, initial_steps=5, refit_growth=0,
                            reselect_growth=0, chunk_steps=5)
-    learned = []
+    learned, said_at_commit = [], []
     assert not learner.add(rows_of("r1", cells, 0, 10.0, 1, n=20), cells, lambda: None)
     assert learner.model is None, "fewer than min_rows: nothing served, the caller keeps them"
+
+    def commit_r1():
+        learned.append("r1")
+        said_at_commit.append(learner.describe())
+
     # `commit` runs under the lock the services answer under: what an answer sees the moment the
     # baselines are served must already say that the GP is being chosen, not "no GP yet"
-    assert learner.add(rows_of("r1", cells, 0, 10.0, 1), cells,
-                       lambda: learned.append(("r1", learner.describe())))
-    assert isinstance(learner.model, BaselineForecast) and len(learned) == 1
-    assert learned[0][1].startswith("serving the baselines while the GP is selected and fitted; "
-                                    "choosing the GP's settings and fitting it"), learned[0]
-    learned[0] = "r1"
+    assert learner.add(rows_of("r1", cells, 0, 10.0, 1), cells, commit_r1)
+    assert isinstance(learner.model, BaselineForecast) and learned == ["r1"]
+    assert said_at_commit[0].startswith(
+        "serving the baselines while the GP is selected and fitted; "
+        "choosing the GP's settings and fitting it"), said_at_commit
     with learner.lock:
         assert "serving the baselines while the GP is selected and fitted" in learner.describe()
     assert "not the GP" in learner.model.status()

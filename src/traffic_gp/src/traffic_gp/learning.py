@@ -165,10 +165,11 @@ class Learner:
     def _finish(self) -> None:
         job = self.job
         if job.error is not None:
-            self.note = (f"{WHAT[job.kind]} failed ({type(job.error).__name__}: {job.error}); "
-                         f"tried again once the rows have doubled")
-            self.job = None           # after the note: the status never reads "no GP yet"
-            log.error("traffic_gp: %s", self.note)
+            note = (f"{WHAT[job.kind]} failed ({type(job.error).__name__}: {job.error}); "
+                    f"tried again once the rows have doubled")
+            with self.lock:
+                self.job, self.note = None, note
+            log.error("traffic_gp: %s", note)
             return
         model = job.result
         if job.later:
