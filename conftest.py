@@ -20,7 +20,8 @@ def _cpu_seconds(children: bool = True) -> float:
     """user+sys of this process and (`children`) of its children that have ended (roslaunch,
     servers, ...)."""
     total = 0.0
-    for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)[:2 if children else 1]:
+    whose = [resource.RUSAGE_SELF] + ([resource.RUSAGE_CHILDREN] if children else [])
+    for who in whose:
         usage = resource.getrusage(who)
         total += usage.ru_utime + usage.ru_stime
     return total

@@ -70,7 +70,6 @@ def run_node(node_name: str, start: Callable[[], object], *, loggers: Iterable[s
     return 0
 
 
-
 def shut_down_rospy(reason: str) -> None:
     """`rospy.signal_shutdown(reason)` for a process that goes on afterwards (a test worker, the
     demo while it stops its launches). rospy's shutdown closes its XML-RPC server's socket but
@@ -82,6 +81,7 @@ def shut_down_rospy(reason: str) -> None:
     for server in servers:
         # what BaseServer.shutdown() sets, without its wait: the loop returns on its next poll
         server._BaseServer__shutdown_request = True
+
 
 def odom_state(msg) -> list:
     """(px, py, yaw, v, w) from a nav_msgs/Odometry."""
