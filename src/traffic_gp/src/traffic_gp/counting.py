@@ -1,0 +1,236 @@
+"""People counts from a robot's own laser and people tracker (no ROS): what `people_counter`
+publishes as robot_common/PeopleCount.
+
+Each scan is placed in the map at the laser's pose. A point of the map is seen by a scan when it
+lies within the scanner's field of view and range and no closer than where its beam stops: the
+measured range (a person or an unmapped obstacle), the map's walls (ray cast in the map, so a
+scan never sees through a mapped wall) and the tracked people's discs (a beam that passes a
+person stops at the person's centre: the person's own spot is seen, what is behind is not).
+A cell's seen part in a scan is the share of its `sub` x `sub` sample points that are seen.
+
+A watch (`watch` seconds of scans) becomes one count message whose semantics are those of
+`robot_common.cells.exposure`: the expected count of a cell watched for `duration` seconds with
+seen part f is density x f x area x (1 + duration / dwell_time), counting everyone who was in its
+seen part at any time of the watch once. Each tracked person (a track `name`) is therefore
+counted once per cell and watch, however many scans saw it there; a track counts only once it
+has been detected in `min_detections` scans (short-lived false tracks do not count); untracked
+detections (empty names) count as the most of them seen in the cell by any one scan. A cell seen
+only part of the watch, or by a moving robot, has the exposure of its first look (its largest
+seen part) plus the people who may have walked in while it was seen (seen part x seen seconds /
+dwell_time); its reported `fraction` is that exposure divided by area x (1 + duration /
+dwell_time), so the crowd model reads exactly that exposure back.
+"""
+import math
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Sequence, Set, Tuple
+
+import numpy as np
+
+from robot_common.cells import DWELL_TIME_S, CellGrid
+from robot_common.maps import raycast
+from traffic_gp.errors import TrafficError
+
+__all__ = ["Detection", "Scan", "Watch", "PeopleCounter", "beam_ranges", "seen_points"]
+
+
+@dataclass(frozen=True)
+class Detection:
+    """A person at (x, y) in the map frame; `name` is the track id ("" for an untracked one)."""
+
+    name: str
+    x: float
+    y: float
+
+
+@dataclass
+class Scan:
+    """One laser scan placed in the map: the laser's pose, its beams (angles relative to the
+    laser, radians, evenly spaced) and their ranges as the scanner reported them."""
+
+    stamp: float                       # seconds
+    pose: Tuple[float, float, float]   # laser x, y, yaw in the map frame
+    angles: np.ndarray
+    ranges: np.ndarray
+    range_min: float = 0.0
+    range_max: float = math.inf
+
+
+@dataclass
+class Watch:
+    """The counts of one watch: cells seen (indices), the exposure-equivalent seen part of each,
+    the people counted in each, when it started, how long it lasted, where the robot was."""
+
+    start: float
+    duration: float
+    x: float
+    y: float
+    cells: np.ndarray
+    fractions: np.ndarray
+    counts: np.ndarray
+
+
+@dataclass
+class _Open:
+    """A watch being accumulated."""
+
+    start: float
+    last: float
+    poses: List[Tuple[float, float]] = field(default_factory=list)
+    first_look: Dict[int, float] = field(default_factory=dict)    # cell -> largest seen part
+    seen_time: Dict[int, float] = field(default_factory=dict)     # cell -> sum of part x seconds
+    tracks: Dict[int, Set[str]] = field(default_factory=dict)     # cell -> track names seen there
+    untracked: Dict[int, int] = field(default_factory=dict)       # cell -> most in one scan
+
+
+def beam_ranges(scan: Scan, vis_grid, people: Sequence[Detection], *, max_range: float,
+                person_radius: float) -> np.ndarray:
+    """How far each beam sees (m): the least of the usable measured range (plus a person's radius,
+    so a person's centre behind the surface the beam hit is seen), the map's walls and the tracked
+    people's centres. NaN and ranges below range_min see nothing; +inf and ranges above range_max
+    (no return) see up to range_max."""
+    x, y, yaw = scan.pose
+    measured = np.asarray(scan.ranges, dtype=float)
+    reach = min(max_range, scan.range_max)
+    measured = np.where(np.isnan(measured) | (measured < scan.range_min), 0.0, measured)
+    measured = np.where(measured > scan.range_max, reach, measured)
+    world = yaw + np.asarray(scan.angles, dtype=float)
+    walls = raycast(vis_grid, x, y, world, reach)
+    stops = np.minimum(np.minimum(measured + person_radius, walls), reach)
+    for person in people:
+        dx, dy = person.x - x, person.y - y
+        along = dx * np.cos(world) + dy * np.sin(world)
+        across = np.abs(-dx * np.sin(world) + dy * np.cos(world))
+        blocked = (along > 0) & (across < person_radius)
+        stops = np.where(blocked, np.minimum(stops, along), stops)
+    return np.maximum(stops, 0.0)
+
+
+def seen_points(scan: Scan, stops: np.ndarray, px, py, *, tolerance: float = 1e-6) -> np.ndarray:
+    """Which world points the scan saw: in the field of view and no farther than their beam."""
+    x, y, yaw = scan.pose
+    angles = np.asarray(scan.angles, dtype=float)
+    increment = (angles[-1] - angles[0]) / max(len(angles) - 1, 1)
+    dx, dy = np.asarray(px, float) - x, np.asarray(py, float) - y
+    relative = np.mod(np.arctan2(dy, dx) - yaw - angles[0] + increment / 2, 2 * math.pi)
+    beam = np.floor(relative / increment).astype(int) if increment > 0 else np.zeros_like(dx, int)
+    inside = (beam >= 0) & (beam < len(angles))
+    result = np.zeros(np.shape(dx), dtype=bool)
+    result[inside] = np.hypot(dx, dy)[inside] <= stops[beam[inside]] + tolerance
+    return result
+
+
+class PeopleCounter:
+    """Turns scans and tracked people into watches of per-cell counts (see the module docstring).
+
+    Args:
+        cells: the map's cells (the crowd model's cells: same map and cell size).
+        watch: seconds of scans per count message.
+        max_range: metres of a scan used for counting (the scanner's range_max caps it too).
+        person_radius: metres; a tracked person's disc occludes what is behind it.
+        dwell_time: seconds a person stays in view of one cell (the crowd model's `dwell_time`).
+        min_detections: scans a track must be detected in before it counts.
+        max_gap: the most seconds one scan stands for (a pause in the scans is not watching).
+        sub: sample points per cell side.
+        vis_resolution: metres; the map is ray cast at about this resolution.
+    """
+
+    def __init__(self, cells: CellGrid, *, watch: float = 10.0, max_range: float = 8.0,
+                 person_radius: float = 0.25, dwell_time: float = DWELL_TIME_S,
+                 min_detections: int = 3, max_gap: float = 0.5, sub: int = 3,
+                 vis_resolution: float = 0.1):
+        if not (watch > 0 and max_range > 0 and person_radius >= 0 and dwell_time > 0
+                and max_gap > 0 and sub >= 1 and min_detections >= 1):
+            raise TrafficError(f"bad counter settings: watch={watch} max_range={max_range} "
+                               f"person_radius={person_radius} dwell_time={dwell_time} "
+                               f"max_gap={max_gap} sub={sub} min_detections={min_detections}")
+        self.cells, self.watch, self.max_range = cells, watch, max_range
+        self.person_radius, self.dwell_time = person_radius, dwell_time
+        self.min_detections, self.max_gap = min_detections, max_gap
+        self.vis_grid = cells.grid.downsample(
+            max(1, int(round(vis_resolution / cells.grid.resolution))))
+        offsets = (np.arange(sub) + 0.5) / sub - 0.5
+        self._dx = np.repeat(offsets, sub) * cells.cell_size
+        self._dy = np.tile(offsets, sub) * cells.cell_size
+        self._hits: Dict[str, int] = {}       # track -> scans it was detected in
+        self._last_seen: Dict[str, float] = {}
+        self._open: Optional[_Open] = None
+
+    def add(self, scan: Scan, people: Sequence[Detection]) -> Optional[Watch]:
+        """Take one scan and the people detected at its time; a finished watch, if this scan
+        ends one (the scan then starts the next watch)."""
+        finished = None
+        if self._open is not None and (scan.stamp < self._open.last
+                                       or scan.stamp - self._open.start >= self.watch):
+            finished = self.flush()
+        if self._open is None:
+            self._open = _Open(scan.stamp, scan.stamp)
+        current = self._open
+        seconds = min(max(scan.stamp - current.last, 0.0), self.max_gap)
+        current.last = scan.stamp
+        current.poses.append(scan.pose[:2])
+        stops = beam_ranges(scan, self.vis_grid, people, max_range=self.max_range,
+                            person_radius=self.person_radius)
+        index, parts = self._cells_seen(scan, stops)
+        for cell, part in zip(index.tolist(), parts.tolist()):
+            current.first_look[cell] = max(current.first_look.get(cell, 0.0), part)
+            current.seen_time[cell] = current.seen_time.get(cell, 0.0) + part * seconds
+        self._count(scan, stops, people, set(index.tolist()))
+        return finished
+
+    def _cells_seen(self, scan: Scan, stops: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        x, y, _ = scan.pose
+        reach = float(stops.max(initial=0.0)) + self.cells.cell_size
+        near = np.nonzero((np.abs(self.cells.x - x) <= reach) & (np.abs(self.cells.y - y) <= reach))[0]
+        px = self.cells.x[near, None] + self._dx[None, :]
+        py = self.cells.y[near, None] + self._dy[None, :]
+        parts = seen_points(scan, stops, px, py).mean(axis=1)
+        keep = parts > 0
+        return near[keep], parts[keep]
+
+    def _count(self, scan: Scan, stops: np.ndarray, people: Sequence[Detection],
+               seen: Set[int]) -> None:
+        if not people:
+            return
+        current = self._open
+        px = np.array([p.x for p in people])
+        py = np.array([p.y for p in people])
+        visible = seen_points(scan, stops, px, py,
+                              tolerance=max(1e-3, 0.5 * self.person_radius))
+        where = self.cells.index_at(px, py)
+        untracked: Dict[int, int] = {}
+        for person, ok, cell in zip(people, visible.tolist(), where.tolist()):
+            if not ok or cell not in seen:
+                continue
+            if person.name:
+                self._hits[person.name] = self._hits.get(person.name, 0) + 1
+                self._last_seen[person.name] = scan.stamp
+                current.tracks.setdefault(cell, set()).add(person.name)
+            else:
+                untracked[cell] = untracked.get(cell, 0) + 1
+        for cell, number in untracked.items():
+            current.untracked[cell] = max(current.untracked.get(cell, 0), number)
+
+    def flush(self) -> Optional[Watch]:
+        """End the open watch: its counts (None when no scan came since the last watch)."""
+        current, self._open = self._open, None
+        if current is None:
+            return None
+        duration = current.last - current.start
+        index = np.array(sorted(current.first_look), dtype=np.int64)
+        exposure = np.array([current.first_look[c] + current.seen_time[c] / self.dwell_time
+                             for c in index.tolist()])
+        fractions = np.clip(exposure / (1.0 + duration / self.dwell_time), 1e-6, 1.0)
+        counts = np.array([self._people_in(current, c) for c in index.tolist()], dtype=np.int64)
+        x, y = np.mean(np.asarray(current.poses), axis=0)
+        self._forget(current.last)
+        return Watch(current.start, duration, float(x), float(y), index, fractions, counts)
+
+    def _people_in(self, current: _Open, cell: int) -> int:
+        names = current.tracks.get(cell, ())
+        confirmed = sum(1 for name in names if self._hits.get(name, 0) >= self.min_detections)
+        return confirmed + current.untracked.get(cell, 0)
+
+    def _forget(self, now: float, after: float = 60.0) -> None:
+        """Drop tracks not seen for `after` seconds (bounded memory on a long-running robot)."""
+        for name in [n for n, last in self._last_seen.items() if now - last > after]:
+            del self._last_seen[name], self._hits[name]
