@@ -10,7 +10,7 @@ from std_msgs.msg import String
 
 from ros_harness import ApacheCouchDB, PouchDBServer, wait_until
 from ros_mongo import open_store
-from ros_mongo.changes import ChangesFollower, matches_selector
+from ros_mongo.changes import ChangesFollower
 from ros_mongo.replication import ReplicationError, ReplicationUnavailable
 
 LONG = 120.0
@@ -26,16 +26,21 @@ def record(store, robot_id, first, count):
             store.insert_message("/chatter", String(data=str(index)), robot_id=robot_id)
 
 
-def test_selector_rules():
-    doc = {"kind": "message", "type": "nav_msgs/Odometry", "topic": "/odom", "robot_id": None}
-    assert matches_selector(doc, {"type": "nav_msgs/Odometry"})
-    assert matches_selector(doc, {"topic": {"$in": ["/odom", "/scan"]}, "kind": {"$eq": "message"}})
-    assert not matches_selector(doc, {"topic": {"$nin": ["/odom"]}})
-    assert not matches_selector(doc, {"topic": {"$ne": "/odom"}})
-    assert matches_selector(doc, {"robot_id": {"$exists": False}, "topic": {"$exists": True}})
-    assert not matches_selector(doc, {"session_id": {"$in": [None]}})
-    with pytest.raises(ReplicationError, match=r"\$regex"):
-        ChangesFollower("http://127.0.0.1:1/db", selector={"topic": {"$regex": "o"}})
+def test_selector_rules_are_apache_couchdbs():
+    """The follower's selector means what it means to Apache CouchDB (ros_mongo.mango, checked
+    against the real server in test_mango.py): a present null is a value, a missing field fails
+    everything but `$exists: false`."""
+    follower = ChangesFollower("http://127.0.0.1:1/db", selector={"robot_id": None})
+    doc = {"_id": "1", "kind": "message", "type": "nav_msgs/Odometry", "topic": "/odom", "robot_id": None}
+    assert follower.selects(doc)                                      # $eq null: the present null
+    assert not follower.selects(dict(doc, kind="topic"))              # kind "message" always
+    assert not follower.selects({k: v for k, v in doc.items() if k != "robot_id"})  # missing
+    assert not follower.selects(dict(doc, _deleted=True))
+    regex = ChangesFollower("http://127.0.0.1:1/db", selector={"topic": {"$regex": "^/od"},
+                                                                  "session_id": {"$in": [None]}})
+    assert not regex.selects(doc) and regex.selects(dict(doc, session_id=None))
+    with pytest.raises(ReplicationError, match=r"\$where"):
+        ChangesFollower("http://127.0.0.1:1/db", selector={"topic": {"$where": "o"}})
 
 
 def in_feed_order(frames, server):

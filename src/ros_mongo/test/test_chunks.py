@@ -15,8 +15,9 @@ from ros_harness import FaultProxy, wait_until
 from ros_mongo import open_store
 from ros_mongo.bagio import export_file
 from ros_mongo.bounded_spool import BoundedSpool
+from ros_mongo.backends.couch import field_matcher
 from ros_mongo.changes import ChangesFollower
-from ros_mongo.chunks import CHUNK_SPAN, Chunker, ChunkPolicy, ChunkRecord, fields_match
+from ros_mongo.chunks import CHUNK_SPAN, Chunker, ChunkPolicy, ChunkRecord
 from ros_mongo.query import Query
 from ros_mongo.recorder import Recorder
 from ros_mongo.records import split_time
@@ -82,8 +83,14 @@ def test_chunker_closes_by_span_count_and_time_going_back():
     assert chunker.due(now=CHUNK_SPAN / 2) == [] and len(chunker.due(now=CHUNK_SPAN)) == 1
 
 
-def test_field_conditions_mean_what_the_servers_make_them_mean():
+def test_field_conditions_on_chunk_messages_mean_what_the_servers_make_them_mean():
+    """A chunk's messages are matched with the selector the server gets for message documents
+    (ros_mongo.documents), evaluated as Apache CouchDB does (ros_mongo.mango)."""
     fields = {"a": 1, "s": "x", "arr": [1.0, 5.0], "inf": "Infinity", "nan": "NaN", "n": None}
+
+    def fields_match(msg, conditions):
+        return field_matcher(Query(fields=conditions))({"kind": "message", "msg": msg})
+
     assert fields_match(fields, {"a": {"$eq": 1}}) and not fields_match(fields, {"a": {"$eq": True}})
     assert not fields_match(fields, {"a": {"$eq": "1"}}) and fields_match(fields, {"arr": {"$eq": 5.0}})
     assert fields_match(fields, {"missing": {"$eq": None}})

@@ -20,12 +20,12 @@ one, with their own ids; the position after a message inside a chunk is
 (JSON-able like a sequence), so a follower started from it yields the rest of that chunk, then
 later changes.
 
-The selector is a Mango-style dict evaluated here on each document (`selects`): top-level fields,
-each either a value (equality) or `{"$eq" | "$ne" | "$in" | "$nin" | "$exists": ...}`. It is not
+The selector is a Mango selector evaluated here on each document (`selects`, ros_mongo.mango:
+the answer Apache CouchDB gives for it; e.g. `$eq null` matches a present null only). It is not
 sent to the server: `_changes?filter=_selector` is documented for CouchDB >= 2 but kills
-pouchdb-server, so both servers get the plain feed and the follower
-drops the documents it does not want. Deletions (a robot's retention deletes only locally, but an
-operator may purge centrally) and design documents are never selected.
+pouchdb-server, so both servers get the plain feed and the follower drops the documents it does
+not want. Deletions (a robot's retention deletes only locally, but an operator may purge
+centrally) and design documents are never selected.
 
 Errors: `poll` raises ReplicationUnavailable (retry later) / ReplicationRefused /
 ReplicationError (ros_mongo.replication); `follow` retries all of them, with back-off, and keeps
@@ -41,14 +41,13 @@ from ros_mongo.backends.couch import CouchStore
 from ros_mongo.chunks import expand
 from ros_mongo.documents import stored_message
 from ros_mongo.errors import StoreError
+from ros_mongo.mango import SelectorError, compile_selector
 from ros_mongo.records import StoredMessage
 from ros_mongo.replication import CouchDatabase, ReplicationError
 
-__all__ = ["FeedItem", "ChangesFollower", "matches_selector"]
+__all__ = ["FeedItem", "ChangesFollower"]
 
 logger = logging.getLogger(__name__)
-
-_OPERATORS = ("$eq", "$ne", "$in", "$nin", "$exists")
 
 
 class FeedItem(NamedTuple):
@@ -58,44 +57,25 @@ class FeedItem(NamedTuple):
     message: StoredMessage
 
 
-def matches_selector(doc: Dict[str, Any], selector: Dict[str, Any]) -> bool:
-    """Whether `doc` meets every top-level condition of `selector` (see the module doc)."""
-    for name, condition in selector.items():
-        present = name in doc and doc[name] is not None
-        value = doc.get(name)
-        if not isinstance(condition, dict):
-            condition = {"$eq": condition}
-        for op, wanted in condition.items():
-            if op == "$eq" and not (present and value == wanted):
-                return False
-            if op == "$ne" and present and value == wanted:
-                return False
-            if op == "$in" and not (present and value in wanted):
-                return False
-            if op == "$nin" and present and value in wanted:
-                return False
-            if op == "$exists" and present != bool(wanted):
-                return False
-    return True
-
-
 class ChangesFollower:
     """Follows the `_changes` feed of the CouchDB database at `url` (credentials allowed in `url`;
-    never shown) from `since`, yielding the message documents that match `selector`."""
+    never shown) from `since`, yielding the message documents that match `selector`. `tls`:
+    tls_ca_file, tls_cert_file, tls_key_file, tls_verify (ros_mongo.couch_client)."""
 
     def __init__(self, url: str, *, selector: Optional[Dict[str, Any]] = None, since: Any = 0,
                  poll_interval: float = 1.0, page: int = 200, timeout: float = 10.0,
-                 backoff_min: float = 0.5, backoff_max: float = 30.0):
+                 backoff_min: float = 0.5, backoff_max: float = 30.0, **tls):
         if page < 1 or poll_interval <= 0 or not 0 < backoff_min <= backoff_max:
             raise ReplicationError(f"bad follower settings: page {page}, poll interval "
                                    f"{poll_interval} s, back-off {backoff_min}..{backoff_max} s")
-        for name, condition in (selector or {}).items():
-            if isinstance(condition, dict) and set(condition) - set(_OPERATORS):
-                raise ReplicationError(f"selector field {name!r}: only {', '.join(_OPERATORS)} "
-                                       f"are supported, got {sorted(condition)}")
-        self.database = CouchDatabase(url, timeout=timeout)
-        self.store = CouchStore(url, timeout=timeout)  # decoding: types, attachments (never connected)
         self.selector = dict({"kind": "message"}, **(selector or {}))
+        try:
+            self._matches = compile_selector(self.selector)
+        except SelectorError as err:
+            raise ReplicationError(f"bad follower selector: {err}") from None
+        self.database = CouchDatabase(url, timeout=timeout, **tls)
+        # decoding (types, attachments) through the same client; the store never connects itself
+        self.store = CouchStore(url, client=self.database)
         self.since: Any = since if since is not None else 0
         self.poll_interval = poll_interval
         self.page = page
@@ -114,7 +94,7 @@ class ChangesFollower:
         """Whether a changed document is wanted (never a deletion or a design document)."""
         if not doc or doc.get("_deleted") or str(doc.get("_id", "")).startswith("_design/"):
             return False
-        return matches_selector(doc, self.selector)
+        return self._matches(doc)
 
     def _decode(self, doc: Dict[str, Any], raw: Optional[bytes] = None) -> Optional[StoredMessage]:
         try:
@@ -196,4 +176,3 @@ class ChangesFollower:
     def close(self) -> None:
         """Close the HTTP sessions."""
         self.database.close()
-        self.store.close()

@@ -17,13 +17,12 @@ Readers never see a chunk: `expand` turns one back into the message documents (a
 document per message would have been, with the same ids, so queries, replay, bag / MCAP export and
 the changes follower keep message granularity and the exact bytes. What the server selects a chunk
 by is its metadata (topic, type, tags, session, robot, author) and its first receive time; the
-time range and conditions on decoded fields are checked here, message by message, with the same
-meaning as the servers' (`fields_match`; see ros_mongo.documents).
+time range and conditions on decoded fields are checked by the reader, message by message, with
+the selector the server gets for message documents (ros_mongo.mango evaluates it as the server).
 
 A chunk is formed once, in memory, before any write (`Chunker`), and travels as one unit through
 the writers, the spool and every retry: its id never changes, so it is stored exactly once.
 """
-import math
 import re
 from dataclasses import dataclass
 from typing import Any, Dict, Iterable, Iterator, List, Optional, Sequence, Tuple
@@ -31,8 +30,7 @@ from typing import Any, Dict, Iterable, Iterator, List, Optional, Sequence, Tupl
 from ros_mongo.records import MessageRecord
 
 __all__ = ["CHUNK_SPAN", "CHUNK_KEYS", "ChunkPolicy", "ChunkRecord", "Chunker", "PendingChunk", "chunk_doc",
-           "expand",
-           "fields_match", "message_count", "sorted_messages"]
+           "expand", "message_count", "sorted_messages"]
 
 #: Seconds of receive time one chunk covers at most (a reader widens a time range's start by it).
 CHUNK_SPAN = 1.0
@@ -254,78 +252,3 @@ class _Reverse(str):
 
     def __gt__(self, other: str) -> bool:
         return str.__lt__(self, other)
-
-
-# -- conditions on decoded fields, message by message (ros_mongo.documents' meaning) --------------
-_MISSING = object()
-_INFINITE = {"Infinity": math.inf, "-Infinity": -math.inf}
-
-
-def _value(fields: Any, path: str) -> Any:
-    value = fields
-    for part in path.split("."):
-        if isinstance(value, dict) and part in value:
-            value = value[part]
-        elif isinstance(value, list) and part.isdigit() and int(part) < len(value):
-            value = value[int(part)]
-        else:
-            return _MISSING
-    return value
-
-
-def _kind(value: Any) -> str:
-    if isinstance(value, bool):
-        return "bool"
-    if isinstance(value, (int, float)):
-        return "number"
-    return type(value).__name__
-
-
-def _same(value: Any, wanted: Any) -> bool:
-    return _kind(value) == _kind(wanted) and value == wanted
-
-
-def _equal(value: Any, wanted: Any) -> bool:
-    if wanted is None:
-        return value is _MISSING or value is None
-    if value is _MISSING:
-        return False
-    return _same(value, wanted) or (isinstance(value, list) and any(_same(v, wanted) for v in value))
-
-
-def _in_range(value: Any, bounds: Dict[str, Any]) -> bool:
-    kind = "string" if isinstance(next(iter(bounds.values())), str) else "number"
-    if kind == "number":
-        if isinstance(value, str) and value in _INFINITE:
-            value = _INFINITE[value]
-        elif _kind(value) != "number" or (isinstance(value, float) and math.isnan(value)):
-            return False
-    elif not isinstance(value, str):
-        return False
-    checks = {"$gt": lambda b: value > b, "$gte": lambda b: value >= b, "$lt": lambda b: value < b,
-              "$lte": lambda b: value <= b}
-    return all(checks[op](bound) for op, bound in bounds.items())
-
-
-def fields_match(fields: Optional[dict], conditions: Dict[str, Dict[str, Any]]) -> bool:
-    """Whether a message's decoded fields meet every condition of a Query's `fields`
-    ({path: {op: value}}), with the meaning ros_mongo.documents gives them on both servers."""
-    for path, ops in conditions.items():
-        value = _value(fields, path) if fields is not None else _MISSING
-        for op, wanted in ops.items():
-            if op == "$eq" and not _equal(value, wanted):
-                return False
-            if op == "$ne" and _equal(value, wanted):
-                return False
-            if op == "$in" and not any(_equal(value, w) for w in wanted):
-                return False
-            if op == "$nin" and any(_equal(value, w) for w in wanted):
-                return False
-            if op == "$exists" and _equal(value, None) == bool(wanted):
-                return False
-        bounds = {op: ops[op] for op in ("$gt", "$gte", "$lt", "$lte") if op in ops}
-        if bounds:
-            candidates: Sequence[Any] = ([value] + value) if isinstance(value, list) else [value]
-            if value is _MISSING or not any(_in_range(v, bounds) for v in candidates):
-                return False
-    return True

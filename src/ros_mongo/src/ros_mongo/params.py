@@ -253,6 +253,17 @@ class ReplicatorParams(NodeConfig):
     retention_period: float = param(60.0, "seconds between retention passes", minimum=1.0)
     retention_batch: int = param(5000, "documents read per retention pass, at most", minimum=1)
     timeout: float = param(10.0, "seconds a database request may take", minimum=0.1)
+    central_tls_ca_file: str = param("", "central over https: a CA bundle for a private CA (empty: "
+                                         "the system's); the robot's store verifies with its own")
+    central_tls_cert_file: str = param("", "central over https: a client certificate (PEM)")
+    central_tls_key_file: str = param("", "central over https: the client certificate's key (PEM), "
+                                          "if not in central_tls_cert_file")
+
+    def central_tls(self) -> Dict[str, str]:
+        """The TLS options of the central database for ros_mongo.couch_client (given ones only)."""
+        given = (("tls_ca_file", self.central_tls_ca_file), ("tls_cert_file", self.central_tls_cert_file),
+                 ("tls_key_file", self.central_tls_key_file))
+        return {key: value for key, value in given if value}
 
     def check(self) -> None:
         if not self.central_url:

@@ -46,10 +46,9 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
 from urllib.parse import quote
 
-import requests
-
+from ros_mongo.couch_client import CouchClient, ErrorFamily
 from ros_mongo.errors import StoreError, StoreRefused, StoreUnavailable
-from ros_mongo.urls import check_url, redact_url, scrub
+from ros_mongo.urls import scrub
 
 __all__ = ["ReplicationError", "ReplicationUnavailable", "ReplicationRefused", "CouchDatabase",
            "ReplicationSpec", "ReplicationStatus", "PushReplication", "PendingTracker",
@@ -76,72 +75,19 @@ class ReplicationRefused(ReplicationError, StoreRefused):
     """The operator must act: credentials, permissions or a database the account may not create."""
 
 
-def _split_userinfo(url: str) -> Tuple[str, Optional[Tuple[str, str]]]:
-    """(url without userinfo, (user, password) or None)."""
-    match = re.match(r"^(\w+://)([^/@]*@)?(.*)$", url)
-    if not match or not match.group(2):
-        return url, None
-    user, _, password = match.group(2)[:-1].partition(":")
-    return match.group(1) + match.group(3), (requests.utils.unquote(user),
-                                             requests.utils.unquote(password))
+REPLICATION_ERRORS = ErrorFamily(ReplicationError, ReplicationUnavailable, ReplicationRefused)
 
 
-class CouchDatabase:
-    """One database on a CouchDB-API server, reached with its own requests.Session."""
+class CouchDatabase(CouchClient):
+    """One database on a CouchDB-API server (ros_mongo.couch_client), raising the replication's
+    errors; `url` is the server root (with any proxy prefix). TLS options as CouchClient's."""
 
-    def __init__(self, url: str, *, timeout: float = 10.0):
-        check_url(url)
-        if not url.startswith(("http://", "https://")):
-            raise ReplicationError(f"not a CouchDB URL (http:// or https://): {redact_url(url)!r}")
-        self.full_url = url.rstrip("/")
-        bare, self.auth = _split_userinfo(self.full_url)
-        self.url, _, name = bare.rpartition("/")  # server root (with any proxy prefix)
-        if not name or "://" not in self.url:
-            raise ReplicationError(f"URL names no database: {redact_url(url)!r}")
-        self.name = requests.utils.unquote(name)
-        self.db_url = bare
-        self.shown = redact_url(self.full_url)
-        self.timeout = timeout
-        self.session = requests.Session()
-        if self.auth:
-            self.session.auth = self.auth
+    def __init__(self, url: str, *, timeout: float = 10.0, **tls):
+        super().__init__(url, timeout=timeout, errors=REPLICATION_ERRORS, **tls)
 
-    def request(self, method: str, path: str, *, ok=(200, 201, 202), server: bool = False,
-                **kwargs) -> requests.Response:
-        """`method` on the database (or the server root when `server`); typed errors."""
-        url = (self.url if server else self.db_url) + path
-        where = f"{self.url if server else self.shown}{path.split('?')[0]}"
-        try:
-            response = self.session.request(method, url, timeout=self.timeout, **kwargs)
-        except (requests.ConnectionError, requests.Timeout) as err:
-            raise ReplicationUnavailable(f"{redact_url(where)} is unreachable: "
-                                         f"{type(err).__name__}") from err
-        except requests.RequestException as err:
-            raise ReplicationError(scrub(f"{method} {redact_url(where)} failed: {err}",
-                                         self.full_url)) from err
-        if response.status_code in ok:
-            return response
-        reason = scrub(response.text[:300].strip(), self.full_url)
-        text = f"{method} {redact_url(where)} answered {response.status_code}: {reason}"
-        if response.status_code in (401, 403):
-            raise ReplicationRefused(text)
-        if response.status_code == 429 or response.status_code >= 500:
-            raise ReplicationUnavailable(text)
-        raise ReplicationError(text)
-
-    def json(self, method: str, path: str, **kwargs) -> Any:
-        response = self.request(method, path, **kwargs)
-        try:
-            return response.json()
-        except ValueError as err:
-            raise ReplicationUnavailable(f"{self.shown}{path.split('?')[0]}: not a JSON answer") from err
-
-    def server_info(self) -> dict:
-        return self.json("GET", "/", server=True)
-
-    def is_apache_couchdb(self) -> bool:
-        """Apache CouchDB says {"couchdb": "Welcome"} at its root; pouchdb-server does not."""
-        return "couchdb" in self.server_info()
+    @property
+    def url(self) -> str:
+        return self.server_url
 
     def ensure_exists(self) -> bool:
         """Create the database if it is missing (True if created); ReplicationRefused when the
@@ -157,9 +103,6 @@ class CouchDatabase:
             return {}
         answer = self.json("POST", "/_revs_diff", json={i: [r] for i, r in revs.items()})
         return {i: entry.get("missing", []) for i, entry in answer.items() if entry.get("missing")}
-
-    def close(self) -> None:
-        self.session.close()
 
 
 @dataclass(frozen=True)
@@ -228,9 +171,7 @@ class PushReplication:
         self.central = central
         self.spec = spec
         self.doc_id = doc_id
-        self.replicator = CouchDatabase(local.url + "/_replicator", timeout=local.timeout)
-        if local.auth:
-            self.replicator.session.auth = local.auth
+        self.replicator = local.sibling("_replicator")
         self._apache: Optional[bool] = None
 
     @classmethod
@@ -332,12 +273,18 @@ class PushReplication:
     def _scrub(self, text: str) -> str:
         return scrub(scrub(text, self.central.full_url), self.local.full_url)
 
-    def central_reachable(self) -> bool:
+    def central_problem(self) -> Optional[ReplicationError]:
+        """None when the central database answers this account (404: up, database not created
+        yet); else why not: ReplicationRefused (credentials, permissions, TLS verification),
+        ReplicationUnavailable (unreachable), ReplicationError (anything else)."""
         try:
-            self.central.request("GET", "", ok=(200, 404))  # 404: up, database not created yet
-            return True
-        except ReplicationError:
-            return False
+            self.central.request("GET", "", ok=(200, 404))
+            return None
+        except ReplicationError as err:
+            return err
+
+    def central_reachable(self) -> bool:
+        return self.central_problem() is None
 
 
 @dataclass

@@ -52,7 +52,7 @@ class ReplicatorNode:
                                        environ=environ)
         warn_password_in_url(config.local_url)  # open_store would; CouchDatabase does not
         self.local = CouchDatabase(config.local_url, timeout=config.timeout)
-        self.central = CouchDatabase(central_url, timeout=config.timeout)
+        self.central = CouchDatabase(central_url, timeout=config.timeout, **config.central_tls())
         self.spec = ReplicationSpec(tuple(config.topics), tuple(config.local_topics))
         self.replication = PushReplication.for_robot(self.local, self.central, self.robot_id, self.spec)
         self.tracker = PendingTracker(self.local, self.central, self.spec,
@@ -69,6 +69,7 @@ class ReplicatorNode:
         self.reachable: Optional[bool] = None
         self.status = ReplicationStatus("stopped")
         self.last_error = ""
+        self.central_error = ""  # why central cannot be reached or refuses this account
         self._last_retention = 0.0
         self._restarted_at = 0.0
 
@@ -135,9 +136,13 @@ class ReplicatorNode:
                 break
 
     def _step(self) -> None:
-        reachable = self.replication.central_reachable()
+        problem = self.replication.central_problem()
+        reachable = problem is None
         came_back = reachable and self.reachable is False
         self.reachable = reachable
+        self.central_error = "" if problem is None else str(problem)
+        if problem is not None:
+            self.last_error = str(problem)
         try:
             if self.wanted and not self.started:
                 self._ensure_started()
@@ -175,8 +180,9 @@ class ReplicatorNode:
             status.level, status.message = DiagnosticStatus.ERROR, f"replication {self.status.state}"
         elif not self.wanted:
             status.level, status.message = DiagnosticStatus.WARN, "replication stopped by request"
-        elif self.reachable is False:
-            status.level, status.message = DiagnosticStatus.WARN, "central unreachable: keeping data locally"
+        elif self.central_error:  # redacted: credentials, certificate or network; data kept locally
+            status.level = DiagnosticStatus.ERROR
+            status.message = f"central not replicating (data kept locally): {self.central_error}"
         elif counts.lag_seconds > self.config.lag_warn:
             status.level, status.message = DiagnosticStatus.WARN, f"lagging {counts.lag_seconds:.0f} s"
         else:

@@ -15,6 +15,9 @@ Contracts:
   password in the URL itself wins over both (and is what `password_in_url` reports, so callers
   can warn that it shows in `ps` and parameter listings).
 - `check_url(url)` raises StoreError for a URL without a scheme, quoting only its redacted form.
+- `split_credentials(url)` is the one URL/credential parser of the HTTP clients: the URL without
+  its userinfo and the percent-decoded (user, password), the userinfo ending at the LAST '@'
+  before the path (a password may hold '@', '/' and ':' raw or percent-encoded).
 - `scrub(text, url)` removes the URL's password (raw and percent-encoded) from any text, for
   error messages built from driver exceptions.
 - `with_credentials` is the one place every node's database URL goes through (`open_store` calls
@@ -37,7 +40,7 @@ from urllib.parse import quote, unquote
 
 from ros_mongo.errors import StoreError
 
-__all__ = ["redact_url", "with_credentials", "check_url", "scrub", "password_in_url",
+__all__ = ["redact_url", "with_credentials", "check_url", "scrub", "split_credentials", "password_in_url",
            "password_warning", "warn_password_in_url", "PASSWORD_ENV", "USER_ENV", "CredentialsError",
            "NODE_CREDENTIALS_HINT"]
 
@@ -211,6 +214,16 @@ def with_credentials(url: str, *, credentials_file: Optional[str] = None,
     return f"{scheme}{quote(user, safe='')}:{quote(password, safe='')}@{location}{tail}"
 
 
+def split_credentials(url: str) -> Tuple[str, Optional[Tuple[str, str]]]:
+    """(`url` without its userinfo, (user, password) percent-decoded, or None without userinfo).
+    The userinfo ends at the last '@' before the path; the user at its first ':'."""
+    scheme, userinfo, location, tail = _split(url)
+    if not userinfo:
+        return url, None
+    user, _, password = userinfo[:-1].partition(":")
+    return scheme + location + tail, (unquote(user), unquote(password))
+
+
 def scrub(text: str, url: str) -> str:
     """`text` with the password of `url` (raw and percent-encoded) and any URL in it redacted."""
     if not isinstance(url, str):
@@ -218,7 +231,7 @@ def scrub(text: str, url: str) -> str:
     _scheme, userinfo, _location, _tail = _split(url)
     if ":" in userinfo:
         password = userinfo[:-1].split(":", 1)[1]
-        for secret in {password, unquote(password)}:
+        for secret in {password, unquote(password), quote(unquote(password), safe='')}:
             if len(secret) >= 1:
                 text = text.replace(secret, _MASK)
     return re.sub(r"[A-Za-z][A-Za-z0-9+.-]*://[^\s'\"]+", lambda m: redact_url(m.group(0)), text)

@@ -40,7 +40,7 @@ import json
 import logging
 import time
 from typing import Dict, Iterator, List, Optional, Tuple
-from urllib.parse import quote, unquote, urlsplit, urlunsplit
+from urllib.parse import quote
 
 import orjson
 import pybase64
@@ -53,11 +53,12 @@ from ros_mongo.chunks import (
     ChunkRecord,
     chunk_doc,
     expand,
-    fields_match,
     sorted_messages,
 )
+from ros_mongo.couch_client import CouchClient
 from ros_mongo.documents import META_KEYS, message_doc, query_conditions, to_selector, topic_doc
 from ros_mongo.errors import BatchTooLarge, QueryError, StoreError, StoreRefused, StoreUnavailable
+from ros_mongo.mango import compile_selector
 from ros_mongo.query import Query
 from ros_mongo.records import MessageRecord, TopicInfo
 
@@ -87,78 +88,28 @@ class CouchStore(MessageStore):
 
     def __init__(self, url: str, *, timeout: float = 30.0, page_size: int = 200,
                  tls_ca_file: Optional[str] = None, tls_cert_file: Optional[str] = None,
-                 tls_key_file: Optional[str] = None, tls_verify: bool = True, **options):
+                 tls_key_file: Optional[str] = None, tls_verify: bool = True,
+                 client: Optional[CouchClient] = None, **options):
         super().__init__(url, **options)
-        parts = urlsplit(url)
-        segments = parts.path.strip("/").split("/") if parts.path.strip("/") else []
-        self.db_name = unquote(segments[-1]) if segments else "robot_data"
+        self.client = client or CouchClient(url, timeout=timeout, tls_ca_file=tls_ca_file,
+                                            tls_cert_file=tls_cert_file, tls_key_file=tls_key_file,
+                                            tls_verify=tls_verify)
+        self.db_name = self.client.name
         if self.db_name[0] not in "abcdefghijklmnopqrstuvwxyz" or not set(self.db_name) <= _DB_NAME_CHARS:
             raise StoreError(f"bad CouchDB database name {self.db_name!r}: lowercase letters, digits "
                              f"and _$()+-/ only, starting with a letter")
-        netloc = parts.hostname or "localhost"
-        if parts.port:
-            netloc = f"{netloc}:{parts.port}"
-        prefix = "/".join(segments[:-1])
-        self.server_url = urlunsplit((parts.scheme, netloc, "/" + prefix if prefix else "", "", ""))
-        self.db_url = f"{self.server_url}/{quote(self.db_name, safe='')}"
-        self.timeout = float(timeout)
+        self.timeout = self.client.timeout
         self.page_size = int(page_size)
-        self.session = requests.Session()
-        self.session.headers.update({"Accept": "application/json"})
-        if parts.username:
-            self.session.auth = (unquote(parts.username), unquote(parts.password or ""))
-        if tls_ca_file:
-            self.session.verify = str(tls_ca_file)
-        elif not tls_verify:
-            self.session.verify = False
-        if tls_cert_file:
-            self.session.cert = ((str(tls_cert_file), str(tls_key_file)) if tls_key_file
-                                 else str(tls_cert_file))
         self.indexed: Optional[bool] = None  # whether the Mango indexes exist (None: not known yet)
 
-    # -- HTTP --------------------------------------------------------------------------------
+    # -- HTTP (ros_mongo.couch_client: one client, one error mapping) ---------------------------
     def _request(self, method: str, path: str, *, ok=(200, 201, 202), **kwargs) -> requests.Response:
         """One request; any answer outside `ok` raises per the taxonomy in the module docstring."""
-        url = self.db_url + path
-        try:
-            # verify given per request: requests lets REQUESTS_CA_BUNDLE override the session's
-            timeout = kwargs.pop("timeout", self.timeout)
-            response = self.session.request(method, url, timeout=timeout, verify=self.session.verify,
-                                            **kwargs)
-        except requests.exceptions.SSLError as err:  # (a ConnectionError subclass: first)
-            raise StoreRefused(f"TLS with CouchDB at {self.url} failed (check tls_ca_file / "
-                               f"tls_cert_file): {_ssl_reason(err)}") from err
-        except (requests.ConnectionError, requests.Timeout, requests.exceptions.ChunkedEncodingError,
-                requests.exceptions.ContentDecodingError) as err:
-            raise StoreUnavailable(f"CouchDB at {self.url} is unreachable or cut the answer short: "
-                                   f"{type(err).__name__}") from err
-        except requests.RequestException as err:
-            raise StoreError(f"CouchDB request {method} {path or '/'} failed: {type(err).__name__}") from err
-        status = response.status_code
-        if status in ok:
-            return response
-        error, reason = _reason(response)
-        said = f"{status}: {error}: {reason}" if error else f"{status}: {reason}"
-        if status in (401, 403) or (error == "error_saving_ddoc" and "forbidden" in reason):
-            raise StoreRefused(f"CouchDB refused {method} {path or '/'} on {self.url} ({said})")
-        if status == 413:
-            raise BatchTooLarge(f"CouchDB refused {method} {path or '/'} as too large ({said})",
-                                doc_id=reason if error == "document_too_large" else None)
-        if status == 429 or (status >= 500 and status != 501):
-            raise StoreUnavailable(f"CouchDB at {self.url} is unavailable ({said})")
-        if status == 501:
-            raise StoreRefused(f"CouchDB at {self.url} does not support {method} {path or '/'} ({said})")
-        raise StoreError(f"CouchDB {method} {path or '/'} answered {said}")
+        return self.client.request(method, path, ok=ok, **kwargs)
 
     def _json(self, method: str, path: str, **kwargs):
         """The JSON body of a successful request (a body that is not JSON: StoreUnavailable)."""
-        response = self._request(method, path, **kwargs)
-        try:
-            return response.json()
-        except ValueError:
-            raise StoreUnavailable(f"CouchDB at {self.url} answered {method} {path or '/'} with "
-                                   f"{response.status_code} and a body that is not JSON "
-                                   f"({len(response.content)} bytes)") from None
+        return self.client.json(method, path, **kwargs)
 
     def _read(self, method: str, path: str, **kwargs):
         """`_json` for reads, retried with backoff while the answer is "retry later" (a truncated
@@ -210,7 +161,7 @@ class CouchStore(MessageStore):
         return True
 
     def close(self) -> None:
-        self.session.close()
+        self.client.close()
 
     # -- writing -----------------------------------------------------------------------------
     def _batch_item(self, record: MessageRecord) -> Tuple[Tuple[str, bool, Tuple[bytes, ...]], int]:
@@ -366,12 +317,14 @@ class CouchStore(MessageStore):
     def _messages(self, docs: Iterator[dict], query: Query, newest_first: bool, with_bytes: bool,
                   decoded: bool) -> Iterator[Tuple[dict, Optional[bytes]]]:
         """Documents of one sorted stream as (message document, bytes), chunks expanded."""
+        match = field_matcher(query)
+
         def items():
             for doc in docs:
                 if doc.get("kind") == "chunk":
                     raw = self._load_blob(doc["_id"]) if with_bytes else None
                     msgs = self.chunk_fields(doc) if decoded or query.fields else None
-                    yield doc, [(m, b) for m, b in expand(doc, raw, msgs) if _chunk_match(m, query)]
+                    yield doc, [(m, b) for m, b in expand(doc, raw, msgs) if match(m)]
                 else:
                     yield doc, (pybase64.b64decode(doc["raw"]) if doc.get("raw") is not None else None)
         low, high = query.start_time, query.end_time
@@ -486,7 +439,7 @@ class CouchStore(MessageStore):
 def _selector(query: Query, topic: Optional[str]) -> Dict[str, object]:
     """The query's selector for one topic's stream (or all topics), without the time range: the
     pager adds that. Chunks are selected by their metadata alone (their messages' fields are
-    checked message by message: `_chunk_match`)."""
+    checked message by message: `field_matcher`)."""
     one_topic = dataclasses.replace(query, topics=[topic] if topic else None, start_time=None,
                                     end_time=None)
     selector = to_selector(query_conditions(one_topic))
@@ -495,9 +448,13 @@ def _selector(query: Query, topic: Optional[str]) -> Dict[str, object]:
     return selector
 
 
-def _chunk_match(message: dict, query: Query) -> bool:
-    """Whether a message of a chunk meets the query's conditions on decoded fields."""
-    return not query.fields or fields_match(message.get("msg"), query.fields)
+def field_matcher(query: Query):
+    """doc -> bool: whether a message document (one of a chunk, expanded) meets the query's
+    conditions on decoded fields, as the server answers the same selector for message documents."""
+    conditions = [c for c in query_conditions(query) if c.field.startswith("msg.")]
+    if not conditions:
+        return lambda doc: True
+    return compile_selector(to_selector(conditions))
 
 
 class _Pager:
@@ -622,24 +579,3 @@ def _id_bound(seconds: float, margin: int, suffix: str) -> str:
     by `margin` microseconds against rounding (the selector checks the exact time)."""
     nanoseconds = max(0, int(round(seconds * 1e9)) + margin * 1000)
     return f"{nanoseconds:019d}{suffix}"
-
-
-def _ssl_reason(err: Exception) -> str:
-    """The OpenSSL reason of a TLS failure (e.g. CERTIFICATE_VERIFY_FAILED), without any URL."""
-    text = str(err)
-    for marker in ("CERTIFICATE_VERIFY_FAILED", "TLSV13_ALERT_CERTIFICATE_REQUIRED", "SSLV3_ALERT",
-                   "WRONG_VERSION_NUMBER", "certificate required", "certificate verify failed"):
-        if marker in text:
-            return marker
-    return type(err).__name__
-
-
-def _reason(response: requests.Response) -> Tuple[str, str]:
-    """(error, reason) of a CouchDB error answer (credentials never appear in them)."""
-    try:
-        data = response.json()
-        if isinstance(data, dict):
-            return str(data.get("error", "")), str(data.get("reason", ""))
-    except ValueError:
-        pass
-    return "", response.text[:200]
