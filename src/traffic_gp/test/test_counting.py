@@ -70,14 +70,15 @@ def test_a_person_hides_the_cells_in_their_shadow_and_is_counted_in_their_own_ce
     person = Detection("p1", 2.25, 1.25)
     counter.add(full_scan(0.0, 0.75, 1.25), [person])
     seen = seen_of(counter.flush())
-    # 1.5 m ahead, a 0.25 m disc shades beams within asin(0.25 / 1.5) = 9.6 degrees: every sample
-    # point of the cell at (4.75, 1.25) is within 2.4 degrees of the line, so it is not seen
+    # 1.5 m ahead, a 0.25 m disc shades beams within asin(0.25 / 1.5) = 9.6 degrees beyond its
+    # far side (1.75 m at most): every sample point of the cell at (4.75, 1.25) is 3.8 m away or
+    # more and within 2.4 degrees of the line, so it is not seen
     assert cell_at(cells, 4.75, 1.25) not in seen
     # the cell at (4.75, 2.25) lies 11.8 degrees and more off the line: seen whole
     assert seen[cell_at(cells, 4.75, 2.25)] == pytest.approx(1.0)
-    # the person's own cell: its near column of 3 sample points and the person's centre are seen
-    # (4 of 9), the 5 points beside and behind the centre are not
-    assert seen[cell_at(cells, 2.25, 1.25)] == pytest.approx(4 / 9)
+    # the person's own cell: its points up to the disc's far side are seen; the farthest, at
+    # (2.417, 1.417), is 1.675 m away on a beam that leaves the disc 1.693 m out: all 9 are seen
+    assert seen[cell_at(cells, 2.25, 1.25)] == pytest.approx(1.0)
 
 
 def test_a_person_behind_another_is_not_counted():
@@ -133,13 +134,28 @@ def test_a_robot_standing_still_counts_each_tracked_person_once():
 
 def test_a_person_walking_through_three_cells_counts_once_in_each():
     cells = corridor()
-    counter = PeopleCounter(cells, min_detections=3)
-    path = [1.25] * 3 + [1.75] * 3 + [2.25] * 3
+    counter = PeopleCounter(cells, min_detections=3, smoothing=0.3, cell_margin=0.1)
+    path = [1.25] * 6 + [1.75] * 6 + [2.25] * 6
     for step, x in enumerate(path):
         counter.add(full_scan(step * 0.1, 3.0, 0.75), [Detection("walker", x, 1.75)])
     watch = counter.flush()
+    # smoothed x after the step to 1.75: 1.40, 1.505, 1.579, 1.630 (beyond the cell's edge 1.5
+    # by more than 0.1: now in the next cell); after the step to 2.25: .., 2.046, 2.107 (beyond 2.1)
     counted = sorted(cells.x[watch.cells[watch.counts > 0]].tolist())
     assert counted == [1.25, 1.75, 2.25] and watch.counts.sum() == 3
+
+
+def test_a_person_standing_at_a_cell_edge_counts_once_as_the_position_jitters():
+    cells = corridor()
+    counter = PeopleCounter(cells, min_detections=3, smoothing=0.3, cell_margin=0.1)
+    for step in range(40):             # x jitters about the edge at x = 2.0 between cells
+        counter.add(full_scan(step * 0.1, 3.0, 0.75),
+                    [Detection("still", 1.98 if step % 2 == 0 else 2.03, 1.75)])
+    watch = counter.flush()
+    # first seen at 1.98 (the cell of x 1.5..2.0); the smoothed x stays within 1.98..2.03, never
+    # 0.1 beyond that cell, so the person counts there only
+    counted = cells.x[watch.cells[watch.counts > 0]].tolist()
+    assert counted == [1.75] and watch.counts.sum() == 1
 
 
 def test_the_watch_exposure_counts_the_seconds_each_cell_was_seen():

@@ -55,6 +55,25 @@ class SensorSimParams(NodeConfig):
     odom_frame: str = param("odom", "odometry frame")
     base_frame: str = param("base_link", "robot base frame")
     map_frame: str = param("map", "map frame (map -> odom is the identity)")
+    crowd: bool = param(False, "simulate people: the laser sees them, `people` reports them as a "
+                               "tracker would, `~people_truth` has the true people in view")
+    crowd_hour: float = param(-1.0, "hour of the week (0 = Monday 00:00) of the people densities; "
+                                    "negative: the time of week of the stamps (UTC)")
+    peak_density: float = param(0.15, "people per m^2 in a main hall on a weekday afternoon",
+                                minimum=0.0)
+    crowd_seed: int = param(1, "seed of the people and the tracker's errors")
+    person_radius: float = param(0.25, "radius of a person's disc (m)", minimum=0.0)
+    miss_rate: float = param(0.1, "share of the scans in which the tracker misses a visible person")
+    false_positive_rate: float = param(0.1, "share of the tracker's reported tracks that are false")
+    false_track_scans: int = param(2, "scans a false track lasts", minimum=1)
+    tracker_noise: float = param(0.05, "standard deviation of the tracked positions (m)",
+                                 minimum=0.0)
+    people_frame: str = param("odom", "frame of the tracked people")
+
+    def check(self) -> None:
+        if not (0 <= self.miss_rate < 1 and 0 <= self.false_positive_rate < 1):
+            raise ConfigError(f"~miss_rate and ~false_positive_rate must be in [0, 1), got "
+                              f"{self.miss_rate} and {self.false_positive_rate}")
 
 
 @dataclass

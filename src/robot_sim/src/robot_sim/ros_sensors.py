@@ -1,21 +1,30 @@
 """ROS side of the sensor simulator: a mobile base patrolling a building's main hall (or waypoints
 on a map file), publishing the robot's standard sensor topics, each from its own thread."""
+import math
 import threading
-from typing import Callable
+from typing import Callable, List, Optional
 
 import rospy
 import tf2_ros
 from geometry_msgs.msg import TransformStamped
 from nav_msgs.msg import Odometry
+from geometry_msgs.msg import Point
 from sensor_msgs.msg import Image, JointState, LaserScan
 
+from robot_common.cells import hours_of_week
 from robot_common.maps import yaw_to_quaternion
+from robot_common.msg import People
+from robot_common.msg import Person as PersonMsg
 from robot_common.ros_node import read_config
 from robot_sim.building import building_or_map
+from robot_sim.crowd import Crowd, Person, Tracker
 from robot_sim.mobile_base import PatrolPath, SensorModel, hall_patrol
 from robot_sim.params import SensorSimParams
+from robot_sim.people import PeopleSimulator
 
-__all__ = ["SensorSim", "run_at", "start"]
+__all__ = ["SensorSim", "LASER_X", "people_msg", "run_at", "start"]
+
+LASER_X = 0.1      # the laser is this far ahead of base_link (the static base_link -> laser tf)
 
 
 class SensorSim:
@@ -30,9 +39,17 @@ class SensorSim:
       ~scan_beams (360), ~scan_range (10.0 m): laser scanner.
       ~image_width (320), ~image_height (240): camera (rgb8).
       ~odom_frame ("odom"), ~base_frame ("base_link"), ~map_frame ("map").
+      ~crowd (false; true: people in the halls, `robot_sim.crowd`): ~crowd_hour (-1: the stamps'
+      time of week, UTC; else the hour of the week the densities are held at), ~peak_density
+      (0.15 people/m^2), ~crowd_seed (1), ~person_radius (0.25 m), the tracker's ~miss_rate
+      (0.1), ~false_positive_rate (0.1), ~false_track_scans (2), ~tracker_noise (0.05 m),
+      ~people_frame ("odom").
     Topics (out; the robot's standard interface): odom (nav_msgs/Odometry), scan
-      (sensor_msgs/LaserScan), camera/rgb/image_raw (sensor_msgs/Image), joint_states
-      (sensor_msgs/JointState), /tf, /tf_static (map -> odom, base_link -> laser, camera_rgb_frame).
+      (sensor_msgs/LaserScan; with ~crowd the people in it), camera/rgb/image_raw
+      (sensor_msgs/Image), joint_states (sensor_msgs/JointState), /tf, /tf_static (map -> odom,
+      base_link -> laser, camera_rgb_frame). With ~crowd, with each scan and its stamp: people
+      (robot_common/People, the tracker's report, names are track ids) and ~people_truth
+      (robot_common/People, map frame: the true people the laser sees).
 
     Construction builds the map, the patrol path and the sensor models (MapError for an unreadable
     map file, ValueError for a bad path or sensor); `setup()` creates the publishers and starts
@@ -49,6 +66,17 @@ class SensorSim:
         self.odom_frame = config.odom_frame
         self.base_frame = config.base_frame
         self.map_frame = config.map_frame
+        self.crowd: Optional[Crowd] = None
+        if config.crowd:
+            options = dict(seed=config.crowd_seed, peak_density=config.peak_density)
+            sim = PeopleSimulator.from_building(building, 0.5, **options) if building is not None \
+                else PeopleSimulator.from_map(grid, 0.5, **options)
+            self.crowd = Crowd(sim, radius=config.person_radius, seed=config.crowd_seed)
+            self.tracker = Tracker(miss_rate=config.miss_rate,
+                                   false_positive_rate=config.false_positive_rate,
+                                   false_track_scans=config.false_track_scans,
+                                   noise=config.tracker_noise, seed=config.crowd_seed + 1)
+        self._crowd_lock = threading.Lock()
 
     def setup(self) -> None:
         self.start = rospy.Time.now()
@@ -58,6 +86,9 @@ class SensorSim:
             "image": rospy.Publisher("camera/rgb/image_raw", Image, queue_size=5),
             "joint": rospy.Publisher("joint_states", JointState, queue_size=20),
         }
+        if self.crowd is not None:
+            self.publishers["people"] = rospy.Publisher("people", People, queue_size=10)
+            self.publishers["truth"] = rospy.Publisher("~people_truth", People, queue_size=10)
         self.tf = tf2_ros.TransformBroadcaster()
         self._publish_static_frames()
         config = self.config
@@ -70,7 +101,8 @@ class SensorSim:
 
     def _publish_static_frames(self) -> None:
         frames = [(self.map_frame, self.odom_frame, 0.0, 0.0),
-                  (self.base_frame, "laser", 0.1, 0.2), (self.base_frame, "camera_rgb_frame", 0.05, 0.4)]
+                  (self.base_frame, "laser", LASER_X, 0.2),
+                  (self.base_frame, "camera_rgb_frame", 0.05, 0.4)]
         transforms = []
         for parent, child, x, z in frames:
             transform = TransformStamped()
@@ -118,8 +150,27 @@ class SensorSim:
         msg.angle_max = float(self.sensors.scan_angles[-1])
         msg.angle_increment = self.sensors.scan_increment
         msg.range_min, msg.range_max = 0.05, float(self.sensors.scan_range)
-        msg.ranges = self.sensors.scan(state).astype(float).tolist()
+        if self.crowd is None:
+            msg.ranges = self.sensors.scan(state).astype(float).tolist()
+            self.publishers["scan"].publish(msg)
+            return
+        ranges, report, truth = self._crowd_scan(now, state)
+        msg.ranges = ranges.astype(float).tolist()
         self.publishers["scan"].publish(msg)
+        self.publishers["people"].publish(people_msg(report, now, self.config.people_frame))
+        self.publishers["truth"].publish(people_msg(truth, now, self.map_frame))
+
+    def _crowd_scan(self, now, state):
+        """The crowd moved on to `now`, seen by the laser: (ranges, tracker report, truth)."""
+        seconds = now.to_sec()
+        hours = self.config.crowd_hour if self.config.crowd_hour >= 0 else \
+            float(hours_of_week(seconds, 0.0))
+        pose = (state.x + LASER_X * math.cos(state.yaw), state.y + LASER_X * math.sin(state.yaw),
+                state.yaw)
+        with self._crowd_lock:
+            self.crowd.advance(seconds, hours)
+            return self.tracker.scan(self.sensors.grid, self.crowd, pose, self.sensors.scan_angles,
+                                     self.sensors.scan_range)
 
     def publish_image(self) -> None:
         now, state = self._state()
@@ -139,6 +190,15 @@ class SensorSim:
         msg.position = self.sensors.wheel_angles((now - self.start).to_sec(), state)
         msg.velocity = [state.linear / self.sensors.wheel_radius] * 2
         self.publishers["joint"].publish(msg)
+
+
+def people_msg(people: List[Person], stamp, frame_id: str) -> People:
+    """robot_common/People of `people` (names, positions; velocity 0, reliability 1)."""
+    msg = People()
+    msg.header.stamp, msg.header.frame_id = stamp, frame_id
+    msg.people = [PersonMsg(name=p.name, position=Point(p.x, p.y, 0.0), velocity=Point(),
+                            reliability=1.0) for p in people]
+    return msg
 
 
 def run_at(rate_hz: float, publish: Callable[[], None]) -> threading.Thread:

@@ -4,8 +4,8 @@ publishes as robot_common/PeopleCount.
 Each scan is placed in the map at the laser's pose. A point of the map is seen by a scan when it
 lies within the scanner's field of view and range and no closer than where its beam stops: the
 measured range (a person or an unmapped obstacle), the map's walls (ray cast in the map, so a
-scan never sees through a mapped wall) and the tracked people's discs (a beam that passes a
-person stops at the person's centre: the person's own spot is seen, what is behind is not).
+scan never sees through a mapped wall) and the tracked people's discs (a beam that reaches a
+person sees the person's disc, not what is behind it).
 A cell's seen part in a scan is the share of its `sub` x `sub` sample points that are seen.
 
 A watch (`watch` seconds of scans) becomes one count message whose semantics are those of
@@ -84,25 +84,28 @@ class _Open:
 
 def beam_ranges(scan: Scan, vis_grid, people: Sequence[Detection], *, max_range: float,
                 person_radius: float) -> np.ndarray:
-    """How far each beam sees (m): the least of the usable measured range (plus a person's radius,
-    so a person's centre behind the surface the beam hit is seen), the map's walls and the tracked
-    people's centres. NaN and ranges below range_min see nothing; +inf and ranges above range_max
-    (no return) see up to range_max."""
+    """How far each beam sees (m), never beyond the map's walls (ray cast in the map). A beam that
+    reaches a tracked person's disc (its reading is not shorter than the disc) sees up to the
+    disc's far side: the person's spot is seen, what is behind is not. Any other beam sees its
+    reading plus a person's radius (a person the tracker missed: their centre). NaN and readings
+    below range_min see nothing; +inf and readings above range_max (no return) see to range_max."""
     x, y, yaw = scan.pose
     measured = np.asarray(scan.ranges, dtype=float)
     reach = min(max_range, scan.range_max)
     measured = np.where(np.isnan(measured) | (measured < scan.range_min), 0.0, measured)
     measured = np.where(measured > scan.range_max, reach, measured)
     world = yaw + np.asarray(scan.angles, dtype=float)
-    walls = raycast(vis_grid, x, y, world, reach)
-    stops = np.minimum(np.minimum(measured + person_radius, walls), reach)
+    near, far = np.full(world.shape, np.inf), np.full(world.shape, np.inf)
     for person in people:
         dx, dy = person.x - x, person.y - y
         along = dx * np.cos(world) + dy * np.sin(world)
-        across = np.abs(-dx * np.sin(world) + dy * np.cos(world))
-        blocked = (along > 0) & (across < person_radius)
-        stops = np.where(blocked, np.minimum(stops, along), stops)
-    return np.maximum(stops, 0.0)
+        half = np.sqrt(np.maximum(person_radius ** 2 - (dx * dx + dy * dy - along ** 2), 0.0))
+        first = (along > 0) & (half > 0) & (along - half < near)
+        near, far = np.where(first, along - half, near), np.where(first, along + half, far)
+    on_person = np.isfinite(near) & (measured >= near - person_radius)
+    stops = np.where(on_person, far, measured + person_radius)
+    walls = raycast(vis_grid, x, y, world, reach)
+    return np.maximum(np.minimum(np.minimum(stops, walls), reach), 0.0)
 
 
 def seen_points(scan: Scan, stops: np.ndarray, px, py, *, tolerance: float = 1e-6) -> np.ndarray:
@@ -132,26 +135,31 @@ class PeopleCounter:
         max_gap: the most seconds one scan stands for (a pause in the scans is not watching).
         sub: sample points per cell side.
         vis_resolution: metres; the map is ray cast at about this resolution.
+        smoothing: weight of a new detection in a track's smoothed position (1: none).
+        cell_margin: metres a track's smoothed position must be beyond its cell to move on.
     """
 
     def __init__(self, cells: CellGrid, *, watch: float = 10.0, max_range: float = 8.0,
                  person_radius: float = 0.25, dwell_time: float = DWELL_TIME_S,
                  min_detections: int = 3, max_gap: float = 0.5, sub: int = 3,
-                 vis_resolution: float = 0.1):
+                 vis_resolution: float = 0.1, smoothing: float = 0.3, cell_margin: float = 0.1):
         if not (watch > 0 and max_range > 0 and person_radius >= 0 and dwell_time > 0
-                and max_gap > 0 and sub >= 1 and min_detections >= 1):
+                and max_gap > 0 and sub >= 1 and min_detections >= 1 and 0 < smoothing <= 1
+                and cell_margin >= 0):
             raise TrafficError(f"bad counter settings: watch={watch} max_range={max_range} "
                                f"person_radius={person_radius} dwell_time={dwell_time} "
                                f"max_gap={max_gap} sub={sub} min_detections={min_detections}")
         self.cells, self.watch, self.max_range = cells, watch, max_range
         self.person_radius, self.dwell_time = person_radius, dwell_time
         self.min_detections, self.max_gap = min_detections, max_gap
+        self.smoothing, self.cell_margin = smoothing, cell_margin
         self.vis_grid = cells.grid.downsample(
             max(1, int(round(vis_resolution / cells.grid.resolution))))
         offsets = (np.arange(sub) + 0.5) / sub - 0.5
         self._dx = np.repeat(offsets, sub) * cells.cell_size
         self._dy = np.tile(offsets, sub) * cells.cell_size
         self._hits: Dict[str, int] = {}       # track -> scans it was detected in
+        self._tracks: Dict[str, List] = {}    # track -> [smoothed x, y, its cell]
         self._last_seen: Dict[str, float] = {}
         self._open: Optional[_Open] = None
 
@@ -199,16 +207,36 @@ class PeopleCounter:
         where = self.cells.index_at(px, py)
         untracked: Dict[int, int] = {}
         for person, ok, cell in zip(people, visible.tolist(), where.tolist()):
-            if not ok or cell not in seen:
+            if not ok or cell < 0:
                 continue
             if person.name:
-                self._hits[person.name] = self._hits.get(person.name, 0) + 1
-                self._last_seen[person.name] = scan.stamp
-                current.tracks.setdefault(cell, set()).add(person.name)
-            else:
+                cell = self._track_cell(person, cell, scan.stamp)
+                if cell in seen:
+                    current.tracks.setdefault(cell, set()).add(person.name)
+            elif cell in seen:
                 untracked[cell] = untracked.get(cell, 0) + 1
         for cell, number in untracked.items():
             current.untracked[cell] = max(current.untracked.get(cell, 0), number)
+
+    def _track_cell(self, person: Detection, cell: int, stamp: float) -> int:
+        """The cell a track is in: its position smoothed over its detections, and a new cell
+        only once the smoothed position is `cell_margin` beyond the old one (a person standing
+        at a cell's edge is not counted in both cells as the position jitters)."""
+        self._hits[person.name] = self._hits.get(person.name, 0) + 1
+        self._last_seen[person.name] = stamp
+        state = self._tracks.get(person.name)
+        if state is None:
+            self._tracks[person.name] = [person.x, person.y, cell]
+            return cell
+        weight = self.smoothing
+        state[0] += weight * (person.x - state[0])
+        state[1] += weight * (person.y - state[1])
+        old = state[2]
+        beyond = max(abs(state[0] - self.cells.x[old]), abs(state[1] - self.cells.y[old]))
+        if beyond > self.cells.cell_size / 2 + self.cell_margin:
+            now = int(self.cells.index_at(np.array([state[0]]), np.array([state[1]]))[0])
+            state[2] = now if now >= 0 else old
+        return state[2]
 
     def flush(self) -> Optional[Watch]:
         """End the open watch: its counts (None when no scan came since the last watch)."""
@@ -233,4 +261,4 @@ class PeopleCounter:
     def _forget(self, now: float, after: float = 60.0) -> None:
         """Drop tracks not seen for `after` seconds (bounded memory on a long-running robot)."""
         for name in [n for n, last in self._last_seen.items() if now - last > after]:
-            del self._last_seen[name], self._hits[name]
+            del self._last_seen[name], self._hits[name], self._tracks[name]
