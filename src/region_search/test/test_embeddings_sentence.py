@@ -148,18 +148,17 @@ def test_model_folders_without_a_model_are_clear_errors(tmp_path):
         load_sentence_model(str(tmp_path))
 
 
-def test_backend_falls_back_to_word2vec_and_says_why(tmp_path):
-    (tmp_path / "vectors.txt").write_text(VECTORS)
-    word2vec = dict(source="pretrained", pretrained_path=str(tmp_path / "vectors.txt"),
-                    cache_dir=str(tmp_path / "cache"), remove_components=-1)
-    loaded = load_backend(EmbeddingServerParams(model_path=str(tmp_path), **word2vec))
-    assert loaded.backend == "word2vec" and loaded.embeddings.backend == "word2vec"
-    assert loaded.note.startswith("fallback to word2vec: sentence model unavailable: ")
+def test_backend_falls_back_to_the_static_vectors_and_says_why(tmp_path):
+    loaded = load_backend(EmbeddingServerParams(model_path=str(tmp_path)))
+    assert loaded.backend == "static" and loaded.embeddings.backend == "static"
+    assert loaded.note.startswith("fallback to static: sentence model unavailable: ")
     assert f"{tmp_path} holds no sentence-transformers model" in loaded.note
+    assert loaded.embeddings.dimension == 256
     scores, _ = loaded.embeddings.similarity("the lift", ["water fountain", "elevator"])
     assert scores[1] > scores[0]
     with pytest.raises(ModelError, match=r"sentence model unavailable \(fallback disabled\)"):
-        load_backend(EmbeddingServerParams(model_path=str(tmp_path), fallback=False, **word2vec))
+        load_backend(EmbeddingServerParams(model_path=str(tmp_path), fallback=False))
+    (tmp_path / "vectors.txt").write_text(VECTORS)
     explicit = load_backend(EmbeddingServerParams(
         backend="word2vec", model_path=str(tmp_path / "vectors.txt"),
         cache_dir=str(tmp_path / "cache"), remove_components=-1))
@@ -172,13 +171,13 @@ BLOCK_TORCH = """
 import json, sys
 
 
-class NoTorch:  # an import hook that finds no torch, as on a machine without PyTorch
+class Missing:  # an import hook that finds none of these packages, as on a robot without them
     def find_spec(self, name, path=None, target=None):
-        if name.partition(".")[0] == "torch":
+        if name.partition(".")[0] in sys.argv[3].split(","):
             raise ModuleNotFoundError(f"No module named {name!r}")
 
 
-sys.meta_path.insert(0, NoTorch())
+sys.meta_path.insert(0, Missing())
 from region_search.backends import EmbeddingServerParams, load_backend
 
 b = load_backend(EmbeddingServerParams(source="pretrained", pretrained_path=sys.argv[1],
@@ -187,15 +186,25 @@ print(json.dumps({"backend": b.backend, "note": b.note, "torch": "torch" in sys.
 """
 
 
-def test_without_pytorch_the_backend_falls_back_to_word2vec(tmp_path):
-    """A robot without PyTorch (Python 3.8 robots). The test cannot uninstall torch from the
-    shared venv, so a child process gets an import hook that finds no torch module."""
+def _load_without(packages: str, tmp_path) -> dict:
     (tmp_path / "vectors.txt").write_text(VECTORS)
     out = subprocess.run([sys.executable, "-c", BLOCK_TORCH, str(tmp_path / "vectors.txt"),
-                          str(tmp_path / "cache")], capture_output=True, text=True)
+                          str(tmp_path / "cache"), packages], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr[-2000:]
-    result = json.loads(out.stdout.strip().splitlines()[-1])
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_without_pytorch_the_backend_falls_back_to_static_vectors_then_word2vec(tmp_path):
+    """A robot without PyTorch (Python 3.8 robots), and one without the static vectors either.
+    The test cannot uninstall packages from the shared venv, so a child process gets an import
+    hook that finds no such module."""
+    result = _load_without("torch", tmp_path)
+    assert result["backend"] == "static" and not result["torch"]
+    assert result["note"] == ("fallback to static: sentence model unavailable: cannot import "
+                              "the sentence model's libraries (torch, sentence-transformers): "
+                              "No module named 'torch'")
+    result = _load_without("torch,wordllama", tmp_path)
     assert result["backend"] == "word2vec" and not result["torch"]
-    assert result["note"].startswith("fallback to word2vec: sentence model unavailable: cannot "
-                                     "import the sentence model's libraries (torch, "
-                                     "sentence-transformers): No module named 'torch'")
+    assert result["note"].startswith("fallback to word2vec: sentence model unavailable: cannot ")
+    assert result["note"].endswith("; static model unavailable: the static phrase vectors are "
+                                   "not installed (pip package wordllama)")

@@ -223,30 +223,31 @@ def test_the_default_sentence_backend_ranks_phrases_through_the_services(roslaun
     assert scored.success and candidates[int(np.argmax(scored.scores))] == "printer room"
 
 
-def test_a_missing_sentence_model_falls_back_to_word2vec_or_stops_with_a_clear_error(
+def test_a_missing_sentence_model_falls_back_to_static_vectors_or_stops_with_a_clear_error(
         roslaunch, rospy_node, files, tmp_path):
     """~model_path names a folder without a model: with ~fallback (default) the server serves
-    word2vec and says so everywhere; without, a second server exits with the reason."""
+    the static phrase vectors and says so everywhere; without, a second server exits with the
+    reason."""
     no_model = tmp_path / "no_model"
     no_model.mkdir()
     strict = roslaunch.node("region_search", "embedding_server", name="strict_embedding_server",
                             params={"model_path": str(no_model), "fallback": False})
     launch = start_region_search(roslaunch, rospy_node, files, backend="sentence", model_path=str(no_model),
                                  labels_path=str(files / "labels.json"), layer_service="")
-    assert rospy_node.get_param("/embedding_server/active_backend") == "word2vec"
+    assert rospy_node.get_param("/embedding_server/active_backend") == "static"
     embed = rospy_node.ServiceProxy("/embedding_server/embed", Embed)(phrases=["water fountain"])
-    assert embed.success and embed.backend == "word2vec" and embed.dimension == len(DIMENSIONS)
-    assert embed.backend_note == ("fallback to word2vec: sentence model unavailable: "
+    assert embed.success and embed.backend == "static" and embed.dimension == 256
+    assert embed.backend_note == ("fallback to static: sentence model unavailable: "
                                   f"{no_model} holds no sentence-transformers model "
                                   "(no modules.json or config.json)")
     assert embed.backend_note in embed.message
     recommend = rospy_node.ServiceProxy("/region_recommender/recommend", RecommendRegion)
     response = recommend(phrase="drinking fountain", top_k=1)
     assert response.success and list(response.labels) == ["water_fountain"]
-    assert response.backend == "word2vec" and response.backend_note == embed.backend_note
-    assert "(word2vec backend)" in response.message
+    assert response.backend == "static" and response.backend_note == embed.backend_note
+    assert "(static backend)" in response.message
     assert embed.backend_note in response.message
-    wait_until(lambda: "fallback to word2vec: sentence model unavailable" in launch.log_tail(200),
+    wait_until(lambda: "fallback to static: sentence model unavailable" in launch.log_tail(200),
                30, what="the fallback warning in the embedding server's log")
     # Without fallback: the node exits with the reason (roslaunch reports the death).
     wait_until(lambda: "strict_embedding_server-1] process has died" in strict.log_tail(200), 60,

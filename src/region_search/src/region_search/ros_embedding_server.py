@@ -102,9 +102,6 @@ class EmbeddingServer:
                                         daemon=True)
         self._thread.start()
 
-    def wait_ready(self, timeout: Optional[float] = None) -> bool:
-        return self._ready.wait(timeout)
-
     def _load(self) -> None:
         try:
             loaded = load_backend(self.config, monitor=self.progress)

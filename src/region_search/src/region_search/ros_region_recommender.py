@@ -31,7 +31,7 @@ from region_search.errors import (
     LabelFileError,
     ModelLoadingError,
 )
-from region_search.params import RegionRecommenderParams
+from region_search.params import BACKENDS, RegionRecommenderParams
 from region_search.progress import LOADING_PREFIX
 from region_search.ranking import (
     PlaceRecommender,
@@ -329,12 +329,12 @@ class RegionRecommenderNode:
         vectors of two models must not mix, e.g. after the server restarted with a fallback)."""
         if self.recommender is None or self._built_for != self.client.identity:
             identity = self.client.identity
-            backend = "sentence" if self.client.backend == "sentence" else "word2vec"
+            backend = self.client.backend if self.client.backend in BACKENDS else "word2vec"
             weights = load_ranking_weights(backend, self.ranking_weights_path)  # LabelFileError
             if not self.answer_no_match:
                 weights = replace(weights, no_match_margin=float("-inf"))
-            features = (SentenceFeatures(self.client, self.wordnet) if backend == "sentence"
-                        else WordFeatures(self.client, self.wordnet))
+            features = (WordFeatures(self.client, self.wordnet) if backend == "word2vec"
+                        else SentenceFeatures(self.client, self.wordnet))
             self.recommender = PlaceRecommender(features, weights)
             self._built_for = identity
         return self.recommender
