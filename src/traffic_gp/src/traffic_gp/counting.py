@@ -86,7 +86,8 @@ def beam_ranges(scan: Scan, vis_grid, people: Sequence[Detection], *, max_range:
                 person_radius: float) -> np.ndarray:
     """How far each beam sees (m), never beyond the map's walls (ray cast in the map). A beam that
     reaches a tracked person's disc (its reading is not shorter than the disc) sees up to the
-    disc's far side: the person's spot is seen, what is behind is not. Any other beam sees its
+    disc's far side, at most a diameter beyond the reading (tracked positions are noisy): the
+    person's spot is seen, what is behind is not. Any other beam sees its
     reading plus a person's radius (a person the tracker missed: their centre). NaN and readings
     below range_min see nothing; +inf and readings above range_max (no return) see to range_max."""
     x, y, yaw = scan.pose
@@ -103,7 +104,8 @@ def beam_ranges(scan: Scan, vis_grid, people: Sequence[Detection], *, max_range:
         first = (along > 0) & (half > 0) & (along - half < near)
         near, far = np.where(first, along - half, near), np.where(first, along + half, far)
     on_person = np.isfinite(near) & (measured >= near - person_radius)
-    stops = np.where(on_person, far, measured + person_radius)
+    stops = np.where(on_person, np.minimum(far, measured + 2 * person_radius),
+                     measured + person_radius)
     walls = raycast(vis_grid, x, y, world, reach)
     return np.maximum(np.minimum(np.minimum(stops, walls), reach), 0.0)
 

@@ -1,7 +1,9 @@
-"""The crowd-model node's parameters (`traffic_server`, node name `traffic_gp`); no ROS here.
+"""The parameters of traffic_gp's nodes (`traffic_server`, node name `traffic_gp`; and
+`people_counter`); no ROS here.
 
-`TrafficServerParams` is the one place their defaults and descriptions are written: the node reads it
-with `robot_common.ros_node.read_config`, and config/traffic_gp.yaml is generated from it
+`TrafficServerParams` and `PeopleCounterParams` are the one place their defaults and
+descriptions are written: the nodes read them with `robot_common.ros_node.read_config`, and
+config/traffic_gp.yaml and config/people_counter.yaml are generated from them
 (`python -m robot_common.config_files --write`). `utc_offset_hours` also accepts "" and "local"
 (the machine's local zone, like None) and a number written as a string.
 """
@@ -9,10 +11,10 @@ from dataclasses import dataclass
 from typing import Any, Mapping, Optional
 
 from robot_common.errors import ConfigError
-from robot_common.params import param
+from robot_common.params import NodeConfig, param
 from ros_mongo.params import CentralSourceParams
 
-__all__ = ["TrafficServerParams", "LOCAL_ZONE"]
+__all__ = ["TrafficServerParams", "PeopleCounterParams", "LOCAL_ZONE"]
 
 LOCAL_ZONE = ("", "local")     # utc_offset_hours values that mean the machine's local zone
 
@@ -74,3 +76,34 @@ class TrafficServerParams(CentralSourceParams):
                     raise ConfigError(f"~utc_offset_hours must be hours east of UTC or '' / "
                                       f"'local', got {offset!r}") from err
         return super().from_mapping(params, **kwargs)
+
+
+@dataclass
+class PeopleCounterParams(NodeConfig):
+    """Parameters of the people counter (see `ros_counter.PeopleCounterNode`)."""
+
+    map_yaml: str = param("", "map_server .yaml of the map; empty: the map from the `map` topic")
+    cell_size: float = param(0.5, "cell side in metres (the crowd model's cell_size)")
+    robot_id: str = param("", "robot id of the counts; empty: the global /robot_id parameter, "
+                              "else the host name")
+    watch: float = param(10.0, "seconds of scans per PeopleCount message", minimum=0.1)
+    max_range: float = param(8.0, "metres of each scan used for counting (the scanner's "
+                                  "range_max caps it too)")
+    person_radius: float = param(0.25, "metres; a person's disc hides what is behind it",
+                                 minimum=0.0)
+    dwell_time: float = param(20.0, "seconds a person stays in view of one cell (the crowd "
+                                    "model's dwell_time)")
+    min_detections: int = param(3, "scans a track must be detected in before it counts",
+                                minimum=1)
+    max_gap: float = param(0.5, "the most seconds one scan stands for", minimum=0.01)
+    people_timeout: float = param(0.5, "s; a scan is used with the people message nearest its "
+                                       "stamp within this; a scan without one is not used",
+                                  minimum=0.0)
+    tf_timeout: float = param(0.5, "s to wait for the map -> laser transform of a scan",
+                              minimum=0.0)
+    map_frame: str = param("map", "frame of the map and of the published counts")
+
+    def check(self) -> None:
+        if not (self.cell_size > 0 and self.max_range > 0 and self.dwell_time > 0):
+            raise ConfigError(f"~cell_size, ~max_range and ~dwell_time must be positive, got "
+                              f"{self.cell_size}, {self.max_range}, {self.dwell_time}")
