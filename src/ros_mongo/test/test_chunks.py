@@ -13,9 +13,9 @@ from std_msgs.msg import String
 
 from ros_harness import FaultProxy, wait_until
 from ros_mongo import open_store
+from ros_mongo.backends.couch import field_matcher
 from ros_mongo.bagio import export_file
 from ros_mongo.bounded_spool import BoundedSpool
-from ros_mongo.backends.couch import field_matcher
 from ros_mongo.changes import ChangesFollower
 from ros_mongo.chunks import CHUNK_SPAN, Chunker, ChunkPolicy, ChunkRecord
 from ros_mongo.query import Query

@@ -23,10 +23,12 @@ selector (checked against the real server by test_mango.py). Its rules:
   `$elemMatch` / `$allMatch` (an empty array matches no `$allMatch`); `$regex` (strings only,
   unanchored); `$type` (null, boolean, number, string, array, object); `$mod` [divisor, rest]
   (integers only).
-An operator it does not know raises SelectorError (a ValueError) when the selector is compiled.
+An operator it does not know raises SelectorError (a QueryError) when the selector is compiled.
 """
 import re
 from typing import Any, Callable, Dict, List
+
+from ros_mongo.errors import QueryError
 
 __all__ = ["SelectorError", "compile_selector", "matches"]
 
@@ -35,7 +37,7 @@ _BAD_PATH = object()  # a path goes through a value that is no object (or past a
 Predicate = Callable[[Any], bool]
 
 
-class SelectorError(ValueError):
+class SelectorError(QueryError):
     """A selector that is malformed or uses an operator this evaluator does not know."""
 
 

@@ -190,9 +190,16 @@ class PushReplication:
     def _endpoint(self, database: CouchDatabase, local_name_ok: bool) -> Any:
         if local_name_ok:
             return database.name  # pouchdb-server: the source is its own database (no HTTP hop)
-        if database.auth:
+        if not database.auth:
+            return database.db_url
+        if self._is_apache():
             return {"url": database.db_url, "headers": {"Authorization": _basic(database.auth)}}
-        return database.db_url
+        # pouchdb-server 4.2 turns an Authorization header back into a URL without escaping it:
+        # a password holding '@', '/' and ':' then names another host, and nothing is replicated
+        # (silently). Percent-encoded in the URL, which PouchDB decodes, every password works.
+        user, password = (quote(part, safe="") for part in database.auth)
+        scheme, rest = database.db_url.split("://", 1)
+        return f"{scheme}://{user}:{password}@{rest}"
 
     def document(self, run: str = "") -> dict:
         """A new `_replicator` document (holds the central credentials: never log it). `run`
