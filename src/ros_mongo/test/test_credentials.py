@@ -15,6 +15,7 @@ from ros_mongo.urls import (
     password_in_url,
     redact_url,
     scrub,
+    split_credentials,
     with_credentials,
 )
 
@@ -138,3 +139,19 @@ def test_bag_converter_never_puts_the_url_on_the_command_line(tmp_path):
     assert "ROS_MONGO_DB_URL=" in env_part and argv
     assert "--db-url" not in argv and "mongodb://" not in argv
     assert f"--db-credentials-file {tmp_path / 'creds'}" in argv
+
+
+def test_one_parser_reads_the_userinfo_up_to_the_last_at_and_decodes_it():
+    """Every CouchDB request goes through one client and one parser: a raw password holding '@',
+    '/' and ':' ends at the last '@' before the path; a percent-encoded one is decoded."""
+    from ros_mongo.couch_client import CouchClient
+    from ros_mongo.replication import CouchDatabase
+
+    raw = "http://robot:a@b/c:d@db.example:5984/proxy/fleet"
+    assert split_credentials(raw) == ("http://db.example:5984/proxy/fleet", ("robot", "a@b/c:d"))
+    encoded = "https://robot:a%40b%2Fc%3Ad%25@db.example/fleet"
+    assert split_credentials(encoded)[1] == ("robot", "a@b/c:d%")
+    for client in (CouchClient(raw), CouchDatabase(raw)):
+        assert (client.server_url, client.name, client.auth) == \
+            ("http://db.example:5984/proxy", "fleet", ("robot", "a@b/c:d"))
+        assert "a@b/c:d" not in client.shown and "robot:***@" in client.shown
