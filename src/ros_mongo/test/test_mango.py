@@ -48,7 +48,8 @@ SELECTORS = [
     {"arr": {"$elemMatch": {"$not": {"b": 1}}}}, {"$not": {"$and": [{"a": 1}, {"s": "alpha"}]}},
     {"arr": {"$elemMatch": {"$nor": [{"b": 1}, {"b": 2}]}}}, {"arr": {"$allMatch": {"$not": {"$eq": None}}}},
     {"$nor": [{"$not": {"a": 1}}]}, {"o.p": {"$exists": False}}, {"o.p.x": {"$exists": False}},
-    {"arr.9": {"$exists": False}}, {"$nor": [{"o.p": 1}]}, {"$and": [{"s": {"$exists": True}}, {"$not": {"s": {"$regex": "^a"}}}]},
+    {"arr.9": {"$exists": False}}, {"$nor": [{"o.p": 1}]},
+    {"$and": [{"s": {"$exists": True}}, {"$not": {"s": {"$regex": "^a"}}}]},
 ]
 
 
