@@ -3,10 +3,11 @@
 nodes), against the same calls in-process, and each backend's load time.
 
     python bench/region_search/nlp_service_latency.py [--quick] [--calls N]
-        [--backends sentence,word2vec] [--source auto] [--brown PATH] [--cache-dir DIR]
+        [--backends sentence,static,word2vec] [--source auto] [--brown PATH] [--cache-dir DIR]
 
-Backends: "sentence" (the product default: all-MiniLM-L6-v2) and "word2vec" (the fallback:
-WordNet glosses unless --brown names a Brown corpus, cached), each with the shipped ranking
+Backends: "sentence" (the product default: all-MiniLM-L6-v2), "static" (the fallback without
+PyTorch: WordLlama's static vectors) and "word2vec" (WordNet glosses unless --brown names a Brown
+corpus, cached), each with the shipped ranking
 (region_search.ranking, region_search/ranking_weights.yaml). Each service is
 called over one persistent connection, as the recommender calls the embedding server, with the
 evaluation set's phrases (data/region_eval.yaml) in turn, each in up to 42 wordings
@@ -87,9 +88,9 @@ def in_process(backend: str, args, phrases, labels, calls) -> dict:
                                         brown_path=args.brown, cache_dir=args.cache_dir))
     embeddings = loaded.embeddings
     embeddings.warm_up()
-    if embeddings.phrase_level:
+    if embeddings.phrase_level:  # sentence, static
         local = PlaceRecommender(SentenceFeatures(embeddings.embed_phrases, WordNet()),
-                                 load_ranking_weights("sentence"))
+                                 load_ranking_weights(loaded.backend))
     else:
         local = PlaceRecommender(WordFeatures(embeddings.embed_words, WordNet()),
                                  load_ranking_weights("word2vec"))
@@ -148,7 +149,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="100 calls per service")
     parser.add_argument("--calls", type=int, default=1000)
-    parser.add_argument("--backends", default="sentence,word2vec",
+    parser.add_argument("--backends", default="sentence,static,word2vec",
                         help="comma-separated; the first is the one the target applies to")
     parser.add_argument("--source", default="auto", help="word2vec model (auto: Brown + glosses)")
     parser.add_argument("--brown", default="", help="a Brown corpus for word2vec ('' = only where "
