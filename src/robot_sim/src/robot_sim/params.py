@@ -55,6 +55,7 @@ class SensorSimParams(NodeConfig):
     odom_frame: str = param("odom", "odometry frame")
     base_frame: str = param("base_link", "robot base frame")
     map_frame: str = param("map", "map frame (map -> odom is the identity)")
+    laser_frame: str = param("laser", "laser frame (base_link -> laser: 0.1 m ahead)")
     crowd: bool = param(False, "simulate people: the laser sees them, `people` reports them as a "
                                "tracker would, `~people_truth` has the true people in view")
     crowd_hour: float = param(-1.0, "hour of the week (0 = Monday 00:00) of the people densities; "

@@ -38,7 +38,7 @@ class SensorSim:
       publishing rates (Hz); 0 disables a topic.
       ~scan_beams (360), ~scan_range (10.0 m): laser scanner.
       ~image_width (320), ~image_height (240): camera (rgb8).
-      ~odom_frame ("odom"), ~base_frame ("base_link"), ~map_frame ("map").
+      ~odom_frame ("odom"), ~base_frame ("base_link"), ~map_frame ("map"), ~laser_frame ("laser").
       ~crowd (false; true: people in the halls, `robot_sim.crowd`): ~crowd_hour (-1: the stamps'
       time of week, UTC; else the hour of the week the densities are held at), ~peak_density
       (0.15 people/m^2), ~crowd_seed (1), ~person_radius (0.25 m), the tracker's ~miss_rate
@@ -101,7 +101,7 @@ class SensorSim:
 
     def _publish_static_frames(self) -> None:
         frames = [(self.map_frame, self.odom_frame, 0.0, 0.0),
-                  (self.base_frame, "laser", LASER_X, 0.2),
+                  (self.base_frame, self.config.laser_frame, LASER_X, 0.2),
                   (self.base_frame, "camera_rgb_frame", 0.05, 0.4)]
         transforms = []
         for parent, child, x, z in frames:
@@ -145,7 +145,7 @@ class SensorSim:
     def publish_scan(self) -> None:
         now, state = self._state()
         msg = LaserScan()
-        msg.header.stamp, msg.header.frame_id = now, "laser"
+        msg.header.stamp, msg.header.frame_id = now, self.config.laser_frame
         msg.angle_min = float(self.sensors.scan_angles[0])
         msg.angle_max = float(self.sensors.scan_angles[-1])
         msg.angle_increment = self.sensors.scan_increment

@@ -2,10 +2,11 @@
 
 Loads the demo's crowd model (or trains a small, quick one on simulated robots once: no hold-out
 days, so no settings chosen, no baselines compared and no intervals calibrated, as the node's full
-model does; about a minute on 2 cores), starts
-the simulated robots and the crowd model server (which loads the model without retraining and
-keeps learning online), then compares its answers with the simulator's truth and checks the
-crowd cost map a costmap_2d static layer would read.
+model does; about a minute on 2 cores), starts a robot that counts the people it senses (its
+laser, tf and a people tracker with misses and false tracks among simulated people; traffic_gp's
+people_counter) and the crowd model server (which loads the model without retraining and keeps
+learning online from the counter's counts), then compares its answers with the simulator's truth
+and checks the crowd cost map a costmap_2d static layer would read.
 """
 import subprocess
 import sys
@@ -65,8 +66,7 @@ def run(demo) -> None:
     path = model_file(demo)
     have_map = any(name == "/map" for name, _ in rospy.get_published_topics())
     launch = demo.launch(demo.workspace_launch("crowd_sim.launch"), seed=SEED, with_map=not have_map,
-                         model_path=str(path), time_scale=60, start_hour=WED + 10.75,
-                         publish_period=2.0)
+                         model_path=str(path), counted=True, publish_period=2.0)
     waits.services(launch, [f"{NODE}/predict_count", f"{NODE}/predict_region"], 180)
     count = rospy.ServiceProxy(f"{NODE}/predict_count", PredictCount)
     region = rospy.ServiceProxy(f"{NODE}/predict_region", PredictRegion)
@@ -111,4 +111,8 @@ def run(demo) -> None:
     first = count(10.0, 6.5, rospy.Time(0)).message
     later = waits.wait_until(lambda: (lambda m: m if model_rows(m) > model_rows(first) else None)(
         count(10.0, 6.5, rospy.Time(0)).message), 180, "the model to take in new counts")
-    print(f"  online learning from the simulated robots: '{first}' -> '{later}'")
+    print(f"  online learning from the robot's people counter: '{first}' -> '{later}'")
+    from std_srvs.srv import Trigger
+
+    status = rospy.ServiceProxy("/counting_robot/people_counter/status", Trigger)().message
+    print(f"  people_counter (laser + tf + tracker -> PeopleCount): {status}")
