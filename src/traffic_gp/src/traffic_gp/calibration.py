@@ -15,13 +15,15 @@ agree) and, of those, the one with the best mean log predictive density. COVERAG
 band a calibrated forecast's held-out coverage is expected in. `best_log_density` is the same
 search without the coverage: the held-out log density a forecast reaches with its best
 interval width, the score `selection` compares candidate models by (so the comparison is
-between forecasts, not between their noise models). NumPy only.
+between forecasts, not between their noise models). NumPy only; the count likelihood is
+`predictive`'s.
 """
 from dataclasses import asdict, dataclass
 from typing import Optional, Tuple
 
 import numpy as np
-from scipy import special
+
+import traffic_gp.predictive as predictive
 
 DISPERSIONS = (None,) + tuple(float(r) for r in np.exp(np.linspace(np.log(0.3), np.log(1000.0),
                                                                     14)))
@@ -32,7 +34,7 @@ NEAR = 0.01             # widths this much further from 90% than the nearest com
 MAX_ROWS = 3000         # held-out rows used (a fixed random sample of them)
 SCREEN_ROWS = 600       # rows every width's coverage is first measured on
 SCREEN_SLACK = 0.03     # widths this much further from 90% on them are measured on all rows
-NODES, WEIGHTS = np.polynomial.hermite.hermgauss(10)    # quadrature over the log rate
+N_NODES = 10            # quadrature nodes over the log rate
 
 
 @dataclass
@@ -70,51 +72,18 @@ def widen(mean, var, latent_variance: float) -> Tuple[np.ndarray, np.ndarray]:
     return np.asarray(mean, float) - s / 2.0, np.asarray(var, float) + s
 
 
-def _rates(mean, var, expo) -> Tuple[np.ndarray, np.ndarray]:
-    """Expected counts at the quadrature nodes over the log rate, and the nodes' weights."""
-    mean, var, expo = (np.asarray(a, float) for a in np.broadcast_arrays(mean, var, expo))
-    if not np.any(var > 0):
-        return (expo * np.exp(mean))[:, None], np.ones(1)
-    f = mean[:, None] + np.sqrt(2.0 * np.maximum(var, 0.0))[:, None] * NODES
-    return expo[:, None] * np.exp(f), WEIGHTS / np.sqrt(np.pi)
-
-
-def _cdf(k, rates, dispersion) -> np.ndarray:
-    """P(N <= k) of Poisson(rates) or NB(mean rates, r), k integers (negative: 0)."""
-    k = np.broadcast_to(np.asarray(k, float)[:, None], rates.shape)
-    out = np.zeros(rates.shape)
-    ok = k >= 0
-    if dispersion is None:
-        out[ok] = special.gammaincc(k[ok] + 1.0, rates[ok])
-    else:
-        r = float(dispersion)
-        out[ok] = special.betainc(r, k[ok] + 1.0, r / (r + rates[ok]))
-    return out
-
-
-def _log_pmf(k, rates, dispersion) -> np.ndarray:
-    k = np.asarray(k, float)[:, None]
-    rates = np.maximum(rates, 1e-300)
-    if dispersion is None:
-        return k * np.log(rates) - rates - special.gammaln(k + 1.0)
-    r = float(dispersion)
-    log_total = np.logaddexp(np.log(rates), np.log(r))
-    return (special.gammaln(k + r) - special.gammaln(r) - special.gammaln(k + 1.0)
-            + r * (np.log(r) - log_total) + k * (np.log(rates) - log_total))
-
-
 def log_density(count, mean, var, expo, dispersion) -> float:
     """Mean log predictive density of the counts (the mixture over the log rate)."""
-    rates, weights = _rates(mean, var, expo)
-    return float(np.mean(special.logsumexp(_log_pmf(count, rates, dispersion)
-                                           + np.log(weights), axis=1)))
+    return float(np.mean(predictive.log_density(count, mean, var, expo, dispersion,
+                                                n_nodes=N_NODES)))
 
 
 def _cdf_pair(count, mean, var, expo, dispersion):
     """(F(k - 1), F(k)) of the mixture at each count k."""
     count = np.asarray(count, float).ravel()
-    rates, weights = _rates(mean, var, expo)
-    return _cdf(count - 1.0, rates, dispersion) @ weights, _cdf(count, rates, dispersion) @ weights
+    rates, weights = predictive.node_rates(mean, var, expo, N_NODES)
+    return (predictive.component_cdf(count - 1.0, rates, dispersion) @ weights,
+            predictive.component_cdf(count, rates, dispersion) @ weights)
 
 
 def _shares(lower, upper, level: float = LEVEL) -> Tuple[float, float]:

@@ -4,16 +4,15 @@ The model gives a Gaussian over the log density f at each place and time; a coun
 exposure e is then Poisson(e * exp(f)) (`dispersion=None`) or negative binomial with mean
 mu = e * exp(f) and variance mu + mu^2 / r (`dispersion=r`, overdispersed counts), mixed over f.
 Everything here integrates f out by Gauss-Hermite quadrature. A point forecast (a baseline's
-rate) is the case var = 0.
+rate) is the case var = 0. `log_pmf` and `component_cdf` are the one count likelihood of the
+NumPy side (`calibration` uses them with fewer nodes).
 """
+import functools
 from typing import Optional
 
 import numpy as np
 from scipy import special, stats
 
-NODES, WEIGHTS = np.polynomial.hermite.hermgauss(24)
-LOG_WEIGHTS = np.log(WEIGHTS / np.sqrt(np.pi))
-POINT = (np.zeros(1), np.full(1, np.sqrt(np.pi)))    # one node: a point forecast (var = 0)
 CHUNK = 20000
 
 
@@ -28,24 +27,50 @@ def expected_std(mean, var):
     return np.sqrt(np.expm1(var) * np.exp(2.0 * mean + var))
 
 
-def _quadrature(var):
-    """Gauss-Hermite nodes and weights: one node where every variance is 0 (point forecasts,
-    e.g. a baseline's rate: all nodes would be equal)."""
-    return POINT if not np.any(np.asarray(var)) else (NODES, WEIGHTS)
+@functools.lru_cache(maxsize=None)
+def _hermite(n_nodes: int):
+    nodes, weights = np.polynomial.hermite.hermgauss(n_nodes)
+    return nodes, weights / np.sqrt(np.pi)
 
 
-def _rates(mean, var, expo):
+def node_rates(mean, var, expo, n_nodes: int = 24):
+    """Expected counts expo * exp(f) at the Gauss-Hermite nodes over f ~ N(mean, var) (last
+    axis), and the nodes' weights (summing to 1); one node where every variance is 0 (point
+    forecasts, e.g. a baseline's rate: all nodes would be equal)."""
     mean, var, expo = np.broadcast_arrays(np.asarray(mean, float), np.asarray(var, float),
                                           np.asarray(expo, float))
-    nodes = _quadrature(var)[0]
+    if not np.any(var > 0):
+        return (expo * np.exp(mean))[..., None], np.ones(1)
+    nodes, weights = _hermite(n_nodes)
     f = mean[..., None] + np.sqrt(2.0 * np.maximum(var, 0.0))[..., None] * nodes
-    return expo[..., None] * np.exp(f)
+    return expo[..., None] * np.exp(f), weights
 
 
-def _component_cdf(k, rates, dispersion: Optional[float]):
+def log_pmf(count, rates, dispersion: Optional[float] = None):
+    """log P(N = count) of Poisson(rates) or NB(mean rates, dispersion r), count broadcast over
+    the last axis of `rates` (the quadrature nodes): the one count likelihood in NumPy."""
+    count = np.asarray(count, float)[..., None]
+    rates = np.maximum(rates, 1e-300)
     if dispersion is None:
-        return stats.poisson.cdf(k, rates)
-    return stats.nbinom.cdf(k, dispersion, dispersion / (dispersion + rates))
+        return count * np.log(rates) - rates - special.gammaln(count + 1.0)
+    r = float(dispersion)
+    log_total = np.logaddexp(np.log(rates), np.log(r))
+    return (special.gammaln(count + r) - special.gammaln(r) - special.gammaln(count + 1.0)
+            + r * (np.log(r) - log_total) + count * (np.log(rates) - log_total))
+
+
+def component_cdf(k, rates, dispersion: Optional[float] = None):
+    """P(N <= k) of Poisson(rates) or NB(mean rates, r), k integers broadcast over the last axis
+    of `rates` (negative k: 0)."""
+    k = np.broadcast_to(np.asarray(k, float)[..., None], rates.shape)
+    out = np.zeros(rates.shape)
+    ok = k >= 0
+    if dispersion is None:
+        out[ok] = special.gammaincc(k[ok] + 1.0, rates[ok])
+    else:
+        r = float(dispersion)
+        out[ok] = special.betainc(r, k[ok] + 1.0, r / (r + rates[ok]))
+    return out
 
 
 def _component_ppf(q, rates, dispersion: Optional[float]):
@@ -54,25 +79,17 @@ def _component_ppf(q, rates, dispersion: Optional[float]):
     return stats.nbinom.ppf(q, dispersion, dispersion / (dispersion + rates))
 
 
-def log_density(count, mean, var, expo, dispersion: Optional[float] = None):
+def log_density(count, mean, var, expo, dispersion: Optional[float] = None, *,
+                n_nodes: int = 24):
     """log p(count) of the mixture, per row (held-out log-likelihood)."""
-    rates = np.maximum(_rates(mean, var, expo), 1e-300)
-    count = np.asarray(count, float)[..., None]
-    if dispersion is None:
-        log_p = count * np.log(rates) - rates - special.gammaln(count + 1.0)
-    else:
-        r = float(dispersion)
-        log_total = np.logaddexp(np.log(rates), np.log(r))
-        log_p = (special.gammaln(count + r) - special.gammaln(r) - special.gammaln(count + 1.0)
-                 + r * (np.log(r) - log_total) + count * (np.log(rates) - log_total))
-    return special.logsumexp(log_p + np.log(_quadrature(var)[1] / np.sqrt(np.pi)), axis=-1)
+    rates, weights = node_rates(mean, var, expo, n_nodes)
+    return special.logsumexp(log_pmf(count, rates, dispersion) + np.log(weights), axis=-1)
 
 
-def cdf(count, mean, var, expo, dispersion: Optional[float] = None):
+def cdf(count, mean, var, expo, dispersion: Optional[float] = None, *, n_nodes: int = 24):
     """P(N <= count) of the mixture, per row (count may be -1: gives 0)."""
-    rates = _rates(mean, var, expo)
-    return np.sum(_component_cdf(np.asarray(count, float)[..., None], rates, dispersion)
-                  * _quadrature(var)[1], -1) / np.sqrt(np.pi)
+    rates, weights = node_rates(mean, var, expo, n_nodes)
+    return component_cdf(count, rates, dispersion) @ weights
 
 
 def quantile(q: float, mean, var, expo, dispersion: Optional[float] = None):
@@ -85,15 +102,13 @@ def quantile(q: float, mean, var, expo, dispersion: Optional[float] = None):
     flat = [a.reshape(-1) for a in (mean, var, expo)]
     for start in range(0, flat_out.size, CHUNK):
         part = slice(start, start + CHUNK)
-        rates = _rates(flat[0][part], flat[1][part], flat[2][part])
-        weights = _quadrature(flat[1][part])[1]
+        rates, weights = node_rates(flat[0][part], flat[1][part], flat[2][part])
         ppf = _component_ppf(q, rates, dispersion)
         low = np.min(ppf, axis=1) - 1.0           # P(N <= low) < q
         high = np.max(ppf, axis=1)                # P(N <= high) >= q
         while np.any(high - low > 1):
             mid = np.floor((low + high) / 2.0)
-            ok = np.sum(_component_cdf(mid[:, None], rates, dispersion) * weights, -1) \
-                / np.sqrt(np.pi) >= q - 1e-12
+            ok = component_cdf(mid, rates, dispersion) @ weights >= q - 1e-12
             high = np.where(ok, mid, high)
             low = np.where(ok, low, mid)
         flat_out[part] = np.maximum(high, 0.0)
