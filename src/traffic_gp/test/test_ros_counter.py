@@ -48,6 +48,7 @@ def test_the_counter_counts_the_simulated_crowd_as_it_truly_was(roslaunch, rospy
     finally:
         for subscriber in subscribers:
             subscriber.unregister()
+        listener.unregister()
     status = rospy.ServiceProxy("/people_counter/status", Trigger)().message
     assert "robot robot_7" in status and "scans used" in status, status
     assert {msg.robot_id for msg in counts} == {"robot_7"}

@@ -6,9 +6,8 @@ from typing import Callable, List, Optional
 
 import rospy
 import tf2_ros
-from geometry_msgs.msg import TransformStamped
+from geometry_msgs.msg import Point, TransformStamped
 from nav_msgs.msg import Odometry
-from geometry_msgs.msg import Point
 from sensor_msgs.msg import Image, JointState, LaserScan
 
 from robot_common.cells import hours_of_week

@@ -60,7 +60,7 @@ class PeopleCounterNode:
     def __init__(self, config: PeopleCounterParams):
         self.config = config
         self.counter: Optional[PeopleCounter] = None
-        self._scans: "queue.Queue[LaserScan]" = queue.Queue(maxsize=100)
+        self._scans = queue.Queue(maxsize=100)     # LaserScan messages
         self._people: Deque[Tuple[float, List[Detection]]] = deque(maxlen=200)
         self._people_lock = threading.Lock()
         self._stop = threading.Event()
