@@ -88,7 +88,7 @@ def main() -> int:
           f"| {figures['count_ratio']:.3f} | {figures['recall']:.3f} | "
           f"{figures['hidden_reported']} of {figures['reported']} | "
           f"{figures['counter_cpu_per_s']:.2f} |")
-    print(f"wrote {tc.write_json('people_counting', figures)}")
+    tc.write_json("people_counting", figures)
     return 0
 
 
