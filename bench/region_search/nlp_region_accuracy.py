@@ -51,6 +51,7 @@ from nlp_common import (  # noqa: E402
     wilson,
     write_json,
 )
+from previous_phrase_method import PhraseRegionRecommender  # noqa: E402
 from ranking_fit import (  # noqa: E402
     OPTIONAL_SOURCES,
     Scored,
@@ -61,7 +62,7 @@ from ranking_fit import (  # noqa: E402
 )
 
 from region_search.corpora import WordNet  # noqa: E402
-from region_search.phrase import PhraseRegionRecommender  # noqa: E402
+from region_search.labels import Region  # noqa: E402
 from region_search.ranking import (  # noqa: E402
     DEFAULT_WEIGHTS_PATH,
     PlaceRecommender,
@@ -69,10 +70,10 @@ from region_search.ranking import (  # noqa: E402
     SentenceFeatures,
     WordFeatures,
 )
-from region_search.recommender import Region, RegionRecommender  # noqa: E402
 from region_search.sentence import load_sentence_model  # noqa: E402
 from region_search.static_vectors import load_static_model  # noqa: E402
 from region_search.training import Word2VecParams, load_embeddings  # noqa: E402
+from region_search.word_matching import WordMatcher  # noqa: E402
 
 NEUTRAL = RankingWeights({"name": 1.0})
 
@@ -168,7 +169,7 @@ def previous_release(backend: str, embeddings, wordnet, buildings: dict) -> dict
     if backend == "sentence":
         recommender = PhraseRegionRecommender(embeddings.embed_phrases, wordnet=wordnet)
     else:
-        recommender = RegionRecommender(embeddings.embed_words, wordnet=wordnet, hubness=True)
+        recommender = WordMatcher(embeddings.embed_words, wordnet=wordnet, hubness=True)
     out = {}
     for descriptions in (False, True):
         hits = n = 0

@@ -36,8 +36,8 @@ from nlp_common import OUT_DIR, ROOT, fresh_process_load_seconds, load_eval, per
 
 from region_search.backends import EmbeddingServerParams, load_backend
 from region_search.corpora import WordNet
+from region_search.labels import Region
 from region_search.ranking import PlaceRecommender, SentenceFeatures, WordFeatures, load_ranking_weights
-from region_search.recommender import Region
 from region_search.srv import Embed, PhraseSimilarity, RecommendRegion
 from ros_harness import RosCore, RosLaunch, wait_until
 

@@ -1,7 +1,8 @@
-"""Ranking labelled regions by whole-phrase vectors (a sentence model), not word by word.
+"""The previous release's phrase method, kept as a baseline of the accuracy bench (the nodes rank
+with region_search.ranking): labelled regions by whole-phrase vectors, not word by word.
 
 `PhraseRegionRecommender` gives each label one text, its name words followed by its WordNet
-expansion (recommender.LabelExpander: synonyms, related words, definition words, strongest
+expansion (word_matching.LabelExpander: synonyms, related words, definition words, strongest
 first), e.g. "water fountain: bubbler drinking babble bubble ... jet provide public", encodes the
 texts once (and again only when new labels appear), and scores a phrase by the cosine of its
 vector with each label's. Room numbers identify rooms but barely move a sentence vector
@@ -18,7 +19,7 @@ its name text ("grasp, the GRASP robotics laboratory"), of its expanded text and
 spelling stage matches. Numbers said as words are read as digits first ("room three eleven" ->
 "room 311", text_similarity.spoken_numbers), for the phrase vector and the number rule alike.
 It is the region recommender's method when the embedding service serves phrase vectors (backend
-"sentence"); with word2vec the word-level `RegionRecommender` is better. Same interface:
+"sentence"); with word2vec the word-level `WordMatcher` is better. Same interface:
 `set_regions`, `recommend` -> `Recommendation`.
 """
 from typing import Callable, Dict, List, Optional, Sequence
@@ -28,14 +29,7 @@ import numpy as np
 from region_search.corpora import WordNet
 from region_search.embeddings import EmbeddedWords, phrase_tokens
 from region_search.errors import EmbeddingError
-from region_search.recommender import (
-    ExpansionWeights,
-    LabelExpander,
-    RankedRegion,
-    Recommendation,
-    Region,
-    descriptions_of,
-)
+from region_search.labels import RankedRegion, Recommendation, Region, descriptions_of
 from region_search.text_similarity import (
     content_words,
     is_number,
@@ -43,6 +37,7 @@ from region_search.text_similarity import (
     spoken_numbers,
     tokenize,
 )
+from region_search.word_matching import ExpansionWeights, LabelExpander
 
 __all__ = ["PhraseRegionRecommender"]
 

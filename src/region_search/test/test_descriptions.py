@@ -6,15 +6,9 @@ import json
 import pytest
 
 from region_search.errors import LabelFileError
-from region_search.phrase import PhraseRegionRecommender
-from region_search.recommender import (
-    Region,
-    RegionRecommender,
-    load_descriptions,
-    load_label_file,
-    with_descriptions,
-)
+from region_search.labels import Region, load_descriptions, load_label_file, with_descriptions
 from region_search.text_similarity import spoken_numbers
+from region_search.word_matching import WordMatcher
 
 
 @pytest.mark.parametrize("said, written", [
@@ -80,7 +74,7 @@ def test_bad_description_files_are_clear_errors(tmp_path, content, says):
 def test_word_method_matches_description_words_and_follows_a_changed_description():
     # No vectors, no WordNet: only equal words and spelling, so the description is all that
     # tells the two labs apart.
-    recommender = RegionRecommender(None, hubness=False)
+    recommender = WordMatcher(None, hubness=False)
     plain = [Region("lab_a", 0, 0), Region("lab_b", 1, 1)]
     recommender.set_regions(plain)
     tie = {r.region.name: r.score for r in recommender.recommend("robotics laboratory", 0).results}
@@ -99,29 +93,10 @@ def test_word_method_matches_description_words_and_follows_a_changed_description
 def test_word_method_reads_room_numbers_said_as_words():
     rooms = [Region("towne_311", 0, 0), Region("towne_321", 1, 1), Region("towne_313", 2, 2)]
     for number_words, expected in ((True, "towne_321"), (False, None)):
-        recommender = RegionRecommender(None, number_words=number_words)
+        recommender = WordMatcher(None, number_words=number_words)
         recommender.set_regions(rooms)
         results = recommender.recommend("room three twenty-one", 0).results
         if expected:
             assert results[0].region.name == expected and results[0].score > results[1].score
         else:  # as words, nothing matches any room better than the others
             assert len({round(r.score, 9) for r in results}) == 1
-
-
-def test_phrase_method_uses_descriptions_and_spoken_numbers():
-    from region_search.sentence import load_sentence_model
-
-    sentence = load_sentence_model(cache_size=100)
-    recommender = PhraseRegionRecommender(sentence.embed_phrases)
-    # Names that say nothing: only the descriptions tell the places apart.
-    recommender.set_regions([Region("place_a", 0, 0, description="chemistry laboratory"),
-                             Region("place_b", 1, 1, description="the robotics laboratory"),
-                             Region("place_c", 2, 2, description="a quiet reading room")])
-    for phrase, expected in (("where do they build robots", "place_b"),
-                             ("acids and test tubes", "place_a"),
-                             ("somewhere to read a book", "place_c")):
-        assert recommender.recommend(phrase, 1).results[0].region.name == expected, phrase
-    rooms = PhraseRegionRecommender(sentence.embed_phrases)
-    rooms.set_regions([Region("room_311", 0, 0), Region("room_321", 1, 1)])
-    best = rooms.recommend("room three eleven", 1).results[0]
-    assert best.region.name == "room_311" and "number 311 matches" in best.explanation

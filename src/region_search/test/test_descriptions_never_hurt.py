@@ -24,8 +24,8 @@ import pytest
 import yaml
 
 from region_search.corpora import WordNet
+from region_search.labels import Region
 from region_search.ranking import PlaceRecommender, SentenceFeatures, WordFeatures, load_ranking_weights
-from region_search.recommender import Region
 from region_search.sentence import load_sentence_model
 from region_search.text_similarity import spoken_numbers
 from region_search.training import Word2VecParams, load_embeddings

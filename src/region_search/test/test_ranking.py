@@ -1,7 +1,7 @@
 """The ranking that weighs evidence (region_search.ranking): descriptions never lower a score,
 room numbers decide, "no labelled place matches", the shipped settings file (no ROS).
 
-Word vectors: a hand-made space whose axes are meanings (as test_recommender.py), so the
+Word vectors: a hand-made space whose axes are meanings (as test_word_matching.py), so the
 expected answers follow from the space, not from the code."""
 import numpy as np
 import pytest
@@ -11,6 +11,7 @@ from region_search.corpora import WordNet
 from region_search.embeddings import WordEmbeddings
 from region_search.errors import EmptyPhraseError, LabelFileError, ModelLoadingError
 from region_search.knowledge import PlaceKnowledge
+from region_search.labels import Region
 from region_search.ranking import (
     FEATURES,
     PlaceRecommender,
@@ -21,7 +22,6 @@ from region_search.ranking import (
     load_ranking_weights,
     specific_spelling,
 )
-from region_search.recommender import Region
 from robot_common.errors import WorkspaceError
 
 # Axes: drink, paper, motion, body, robots.

@@ -9,7 +9,7 @@ from gensim.models import KeyedVectors
 from region_search.corpora import WordNet
 from region_search.embeddings import WordEmbeddings
 from region_search.errors import EmbeddingError, EmptyPhraseError, LabelFileError
-from region_search.recommender import LabelExpander, Region, RegionRecommender, load_label_file, parse_labels
+from region_search.labels import Region, load_label_file, parse_labels
 from region_search.text_similarity import (
     SpellingIndex,
     content_words,
@@ -18,6 +18,7 @@ from region_search.text_similarity import (
     string_baseline_score,
     tokenize,
 )
+from region_search.word_matching import LabelExpander, WordMatcher
 from robot_sim.building import generate_building
 
 # Axes: drink, paper, motion, body, people. Each label word points along its meaning.
@@ -98,7 +99,7 @@ def test_bad_label_files_are_clear_errors(tmp_path, content, says):
 
 
 def test_ranking_follows_the_hand_made_space(embed):
-    recommender = RegionRecommender(embed)
+    recommender = WordMatcher(embed)
     recommender.set_regions(regions(LABELS))
     for phrase, best in [("somewhere to print a poster", "printer_room"), ("I need coffee", "cafe"),
                          ("the lift", "elevator"), ("a professor's office", "faculty_offices"),
@@ -113,7 +114,7 @@ def test_ranking_follows_the_hand_made_space(embed):
 
 
 def test_out_of_vocabulary_query_words_are_reported(embed):
-    recommender = RegionRecommender(embed)
+    recommender = WordMatcher(embed)
     recommender.set_regions(regions(LABELS))
     result = recommender.recommend("towne 321")
     assert result.results[0].region.name == "towne_321"
@@ -124,16 +125,16 @@ def test_out_of_vocabulary_query_words_are_reported(embed):
 
 
 def test_empty_phrase_and_bad_options_are_clear_errors(embed):
-    recommender = RegionRecommender(embed)
+    recommender = WordMatcher(embed)
     recommender.set_regions(regions(LABELS))
     with pytest.raises(EmptyPhraseError, match="has no words"):
         recommender.recommend("  ?! ")
     with pytest.raises(EmbeddingError, match="unknown method 'best'"):
-        RegionRecommender(embed, method="best")
+        WordMatcher(embed, method="best")
 
 
 def test_duplicate_labels_at_several_places_are_all_returned(embed):
-    recommender = RegionRecommender(embed)
+    recommender = WordMatcher(embed)
     recommender.set_regions([Region("cafe", 0, 0), Region("cafe", 5, 5), Region("elevator", 1, 1)])
     names = [(r.region.name, r.region.x) for r in recommender.recommend("coffee", 3).results]
     assert names == [("cafe", 0), ("cafe", 5), ("elevator", 1)]
@@ -154,15 +155,15 @@ def test_wordnet_expansion_adds_synonyms_related_words_and_definitions():
 
 @pytest.mark.wordnet
 def test_wordnet_synonyms_find_labels_the_vectors_alone_miss(embed):
-    plain = RegionRecommender(embed)
-    expanded = RegionRecommender(embed, wordnet=WordNet())
+    plain = WordMatcher(embed)
+    expanded = WordMatcher(embed, wordnet=WordNet())
     for recommender in (plain, expanded):
         recommender.set_regions(regions(["elevator", "lounge", "bio_lab"]))
     # "couch" has no vector; WordNet lists it as a synonym of lounge ("sofa, couch, lounge").
     assert expanded.recommend("couch").results[0].region.name == "lounge"
     assert plain.recommend("couch").results[0].score == 0.0
     # Without vectors at all, equal words (after expansion) still match.
-    lexical = RegionRecommender(None, wordnet=WordNet())
+    lexical = WordMatcher(None, wordnet=WordNet())
     lexical.set_regions(regions(["elevator", "lounge", "bio_lab"]))
     assert lexical.recommend("laboratory").results[0].region.name == "bio_lab"
 
@@ -173,7 +174,7 @@ def test_parse_labels_accepts_integers_and_z(tmp_path):
 
 
 def test_hubness_correction_lowers_labels_that_match_everything(embed):
-    plain, corrected = RegionRecommender(embed), RegionRecommender(embed, hubness=True)
+    plain, corrected = WordMatcher(embed), WordMatcher(embed, hubness=True)
     for recommender in (plain, corrected):
         recommender.set_regions(regions(["room", "elevator", "cafe", "printer"]))
 
@@ -192,9 +193,9 @@ def test_hubness_correction_lowers_labels_that_match_everything(embed):
 @pytest.mark.wordnet
 def test_a_share_of_the_word_score_is_the_label_name_alone(embed):
     labels = regions(["printer_room", "cafe", "elevator", "water_fountain"])
-    expanded = RegionRecommender(embed, wordnet=WordNet(), name_text_weight=0.0)
-    names = RegionRecommender(embed)
-    shared = RegionRecommender(embed, wordnet=WordNet(), name_text_weight=0.25)
+    expanded = WordMatcher(embed, wordnet=WordNet(), name_text_weight=0.0)
+    names = WordMatcher(embed)
+    shared = WordMatcher(embed, wordnet=WordNet(), name_text_weight=0.25)
     for recommender in (expanded, names, shared):
         recommender.set_regions(labels)
 
@@ -206,4 +207,4 @@ def test_a_share_of_the_word_score_is_the_label_name_alone(embed):
         for label in alone:
             assert mixed[label] == pytest.approx(0.75 * wide[label] + 0.25 * alone[label])
     assert "on the name alone" in shared.recommend("coffee", 1).results[0].explanation
-    assert RegionRecommender(embed).name_text_weight == 0.0  # no WordNet: names only anyway
+    assert WordMatcher(embed).name_text_weight == 0.0  # no WordNet: names only anyway

@@ -1,14 +1,14 @@
 """Region search: phrases ("drinking fountain") to the labelled places of a map they mean.
 
 Pure-Python cores (no rospy): word and phrase vectors (embeddings, sentence, static_vectors,
-training, backends), corpora (Brown, WordNet), place knowledge from WordNet (knowledge), label
-matching (recommender: word by word; phrase: phrase vectors), the ranking that weighs the
-evidence and says when no place matches (ranking), the nodes' parameters (params). The ROS
-nodes are in ros_embedding_server.py, ros_region_recommender.py and nodes/.
+training, backends), corpora (Brown, WordNet), place knowledge from WordNet (knowledge), labelled
+places and answers (labels), word-by-word matching (word_matching), the ranking that weighs the
+evidence and says when no place matches (ranking, ranking_settings), the nodes' parameters
+(params). The ROS nodes are in ros_embedding_server.py, ros_region_recommender.py and nodes/.
 """
 from region_search.errors import CorpusError, EmbeddingError, EmptyPhraseError, LabelFileError, ModelError
+from region_search.labels import Recommendation, Region
 from region_search.params import EmbeddingServerParams, RegionRecommenderParams
-from region_search.phrase import PhraseRegionRecommender
 from region_search.ranking import (
     PlaceRecommender,
     RankingWeights,
@@ -16,7 +16,7 @@ from region_search.ranking import (
     WordFeatures,
     load_ranking_weights,
 )
-from region_search.recommender import Recommendation, Region, RegionRecommender
+from region_search.word_matching import WordMatcher
 
 __all__ = [
     "EmbeddingServerParams",
@@ -27,8 +27,7 @@ __all__ = [
     "SentenceFeatures",
     "WordFeatures",
     "load_ranking_weights",
-    "RegionRecommender",
-    "PhraseRegionRecommender",
+    "WordMatcher",
     "Recommendation",
     "EmbeddingError",
     "EmptyPhraseError",

@@ -43,22 +43,19 @@ from region_search.corpora import WordNet
 from region_search.embeddings import EmbeddedWords, phrase_tokens
 from region_search.errors import EmbeddingError
 from region_search.knowledge import PlaceKnowledge
+from region_search.labels import (
+    RankedRegion,
+    Recommendation,
+    Region,
+    descriptions_of,
+    distinct_places,
+)
 from region_search.ranking_settings import (
     DEFAULT_WEIGHTS_PATH,
     FEATURES,
     RankingWeights,
     lead_and_gap,
     load_ranking_weights,
-)
-from region_search.recommender import (
-    ExpansionWeights,
-    LabelExpander,
-    RankedRegion,
-    Recommendation,
-    Region,
-    RegionRecommender,
-    descriptions_of,
-    distinct_places,
 )
 from region_search.text_similarity import (
     STOPWORDS,
@@ -68,6 +65,7 @@ from region_search.text_similarity import (
     spoken_numbers,
     tokenize,
 )
+from region_search.word_matching import ExpansionWeights, LabelExpander, WordMatcher
 
 __all__ = ["FEATURES", "RankingWeights", "load_ranking_weights", "DEFAULT_WEIGHTS_PATH",
            "QueryEvidence", "SentenceFeatures", "WordFeatures", "PlaceRecommender",
@@ -265,7 +263,7 @@ class SentenceFeatures:
 
 class WordFeatures:
     """Evidence from word vectors (word2vec): the word-by-word method for names and WordNet
-    words (region_search.recommender), SIF-weighted mean vectors for the knowledge texts."""
+    words (region_search.word_matching), SIF-weighted mean vectors for the knowledge texts."""
 
     def __init__(self, embed_words: Embed, wordnet: Optional[WordNet] = None, *,
                  expansion: ExpansionWeights = ExpansionWeights(), compound_cap: int = 80,
@@ -273,16 +271,16 @@ class WordFeatures:
         self.embed_words = embed_words
         self.compound_keep = compound_keep
         self.labels = _LabelSet(wordnet, expansion, compound_cap)
-        self._names = RegionRecommender(embed_words, number_words=False)
-        self._expanded = (RegionRecommender(embed_words, wordnet=wordnet, weights=expansion,
+        self._names = WordMatcher(embed_words, number_words=False)
+        self._expanded = (WordMatcher(embed_words, wordnet=wordnet, weights=expansion,
                                             hubness=True, name_text_weight=0.0,
                                             number_words=False)
                           if wordnet is not None else self._names)
-        self._query_words = (RegionRecommender(embed_words, wordnet=wordnet, weights=expansion,
+        self._query_words = (WordMatcher(embed_words, wordnet=wordnet, weights=expansion,
                                                hubness=True, name_text_weight=0.0,
                                                expand_query=True, number_words=False)
                              if wordnet is not None else None)
-        self._described = RegionRecommender(embed_words, number_words=False)
+        self._described = WordMatcher(embed_words, number_words=False)
         self._words: Dict[str, Tuple[Optional[np.ndarray], float]] = {}
         self._cache: Dict[str, Dict[str, np.ndarray]] = {}  # name -> its knowledge texts' means
         self._state: Tuple[_Labels, Dict[str, Dict[str, np.ndarray]]] = (_Labels(), {})
@@ -372,7 +370,7 @@ class WordFeatures:
                              list(embedded.oov), [n for n in embedded.notes if n])
 
     @staticmethod
-    def _scores(recommender: RegionRecommender, phrase: str) -> Dict[str, float]:
+    def _scores(recommender: WordMatcher, phrase: str) -> Dict[str, float]:
         return {r.region.name: r.score for r in recommender.recommend(phrase, top_k=0).results}
 
 
@@ -411,7 +409,7 @@ class PlaceRecommender:
         self.regions: List[Region] = []  # one per place name
 
     def set_regions(self, regions: Sequence[Region]) -> None:
-        """Use these regions from now on, one per place name (recommender.distinct_places:
+        """Use these regions from now on, one per place name (labels.distinct_places:
         a label file's place and a regions layer's of the same name are one place); label
         texts are encoded once. Nothing changes when it fails (e.g. the model still loads)."""
         places = distinct_places(regions)

@@ -31,6 +31,7 @@ from region_search.errors import (
     LabelFileError,
     ModelLoadingError,
 )
+from region_search.labels import Region, load_descriptions, load_label_file, with_descriptions
 from region_search.params import BACKENDS, RegionRecommenderParams
 from region_search.progress import LOADING_PREFIX
 from region_search.ranking import (
@@ -38,12 +39,6 @@ from region_search.ranking import (
     SentenceFeatures,
     WordFeatures,
     load_ranking_weights,
-)
-from region_search.recommender import (
-    Region,
-    load_descriptions,
-    load_label_file,
-    with_descriptions,
 )
 from region_search.srv import Embed, RecommendRegion, RecommendRegionResponse
 from robot_common.ros_node import read_config

@@ -1,15 +1,9 @@
-"""Which labelled region of the map a phrase means ("drinking fountain" -> water_fountain).
+"""Word-by-word matching of a phrase with labels (the word2vec backend's evidence).
 
-- `load_label_file(path)`: regions from a map_labelling JSON file
-  (`{"label": {"x": .., "y": .., "orientation": [qx, qy, qz, qw]}}`); a label may carry an
-  optional `"description"`: what a visitor's sign would say ("the GRASP robotics laboratory").
-- `load_descriptions(path)` / `with_descriptions(regions, descriptions)`: descriptions from a
-  sidecar file (`{label: description}`, YAML or JSON) for label files one cannot edit.
-  A description counts as more name words of its label (both ranking methods).
 - `LabelExpander`: a label's words, plus (from WordNet) the synonyms, derivationally related words
   and definition words of the longest WordNet lemmas it contains: "water_fountain" also means
   "drinking fountain, bubbler: a public fountain to provide a jet of drinking water".
-- `RegionRecommender`: ranks regions for a phrase. Each query word finds its best match among a
+- `WordMatcher`: scores labels for a phrase word by word. Each query word finds its best match among a
   label's (weighted) words, by embedding cosine or by spelling (label-name words only: "towne",
   room numbers); the score is the SIF-weighted mean of these matches over the query's words.
   A share of it (`name_text_weight`, 0.3, chosen on the dev phrases by
@@ -20,16 +14,15 @@
   Numbers said as words in a phrase are read as digits first ("room three eleven" -> "room 311",
   text_similarity.spoken_numbers).
 """
-import json
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from region_search.corpora import WordNet
 from region_search.embeddings import EmbeddedWords, phrase_tokens
-from region_search.errors import EmbeddingError, LabelFileError
+from region_search.errors import EmbeddingError
+from region_search.labels import RankedRegion, Recommendation, Region, descriptions_of
 from region_search.text_similarity import (
     STOPWORDS,
     content_words,
@@ -39,94 +32,9 @@ from region_search.text_similarity import (
     tokenize,
 )
 
-__all__ = ["Region", "load_label_file", "parse_labels", "load_descriptions", "with_descriptions",
-           "descriptions_of", "distinct_places",
-           "ExpansionWeights", "LabelExpander", "RankedRegion", "Recommendation",
-           "RegionRecommender"]
+__all__ = ["ExpansionWeights", "LabelExpander", "WordMatcher"]
 
 EmbedWords = Callable[[List[str]], EmbeddedWords]
-
-
-@dataclass(frozen=True)
-class Region:
-    """A labelled place in the map frame."""
-
-    name: str
-    x: float
-    y: float
-    z: float = 0.0
-    orientation: Tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
-    source: str = "label_file"
-    description: str = ""  # optional: what a visitor's sign would say about the place
-
-
-def parse_labels(data, *, origin: str = "labels") -> List[Region]:
-    """Regions from a decoded map_labelling JSON object; LabelFileError names a bad entry."""
-    if not isinstance(data, dict):
-        raise LabelFileError(f"{origin}: expected a JSON object of labels, got {type(data).__name__}")
-    regions = []
-    for name, pose in sorted(data.items()):
-        if not isinstance(pose, dict) or not all(
-                isinstance(pose.get(k), (int, float)) and not isinstance(pose.get(k), bool)
-                for k in ("x", "y")):
-            raise LabelFileError(f"{origin}: label {name!r} needs numeric 'x' and 'y', got {pose!r}")
-        orientation = pose.get("orientation", [0.0, 0.0, 0.0, 1.0])
-        if not (isinstance(orientation, (list, tuple)) and len(orientation) == 4
-                and all(isinstance(v, (int, float)) for v in orientation)):
-            raise LabelFileError(f"{origin}: label {name!r} has a bad orientation {orientation!r} "
-                                 "(want [qx, qy, qz, qw])")
-        if not tokenize(name):
-            raise LabelFileError(f"{origin}: label {name!r} has no letters or digits")
-        description = pose.get("description", "")
-        if not isinstance(description, str):
-            raise LabelFileError(f"{origin}: label {name!r} has a description that is not a "
-                                 f"string: {description!r}")
-        regions.append(Region(name, float(pose["x"]), float(pose["y"]), float(pose.get("z", 0.0)),
-                              tuple(float(v) for v in orientation),
-                              description=" ".join(description.split())))
-    return regions
-
-
-def load_label_file(path) -> List[Region]:
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except OSError as err:
-        raise LabelFileError(f"cannot read label file {path}: {err.strerror}") from err
-    except ValueError as err:
-        raise LabelFileError(f"label file {path} is not valid JSON: {err}") from err
-    return parse_labels(data, origin=str(path))
-
-
-def load_descriptions(path) -> Dict[str, str]:
-    """{label: description} from a sidecar file: a YAML (or JSON) mapping of label names to
-    strings, e.g. `grasp: the GRASP robotics laboratory`; LabelFileError names a bad entry."""
-    import yaml
-
-    path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except OSError as err:
-        raise LabelFileError(f"cannot read description file {path}: {err.strerror}") from err
-    except yaml.YAMLError as err:
-        raise LabelFileError(f"description file {path} is not valid YAML/JSON: {err}") from err
-    if data is None:
-        return {}
-    if not isinstance(data, dict):
-        raise LabelFileError(f"{path}: expected a mapping of label -> description, got "
-                             f"{type(data).__name__}")
-    for name, text in data.items():
-        if not isinstance(name, str) or not isinstance(text, str):
-            raise LabelFileError(f"{path}: entry {name!r}: {text!r} is not label: description text")
-    return {name: " ".join(text.split()) for name, text in data.items()}
-
-
-def with_descriptions(regions: Sequence[Region], descriptions: Dict[str, str]) -> List[Region]:
-    """The regions with the descriptions given for their names (these replace a label file's)."""
-    from dataclasses import replace
-
-    return [replace(r, description=descriptions[r.name]) if r.name in descriptions else r
-            for r in regions]
 
 
 @dataclass(frozen=True)
@@ -218,64 +126,12 @@ class LabelExpander:
                     _add(words, token, w.definition, f"definition of {lemma}")
 
 
-def descriptions_of(regions: Sequence[Region]) -> Dict[str, str]:
-    """{label: its description} (several regions of one name: the first non-empty one)."""
-    described: Dict[str, str] = {}
-    for region in regions:
-        if not described.get(region.name):
-            described[region.name] = region.description
-    return described
-
-
-def distinct_places(regions: Sequence[Region]) -> List[Region]:
-    """One region per place name, in first-seen order: a label file's entry gives the pose
-    (else the first region of that name), the first non-empty description is kept and the
-    sources are joined ("label_file+regions_layer" when both name the place)."""
-    from dataclasses import replace
-
-    groups: Dict[str, List[Region]] = {}
-    for region in regions:
-        groups.setdefault(region.name, []).append(region)
-    merged = []
-    for group in groups.values():
-        chosen = next((r for r in group if r.source == "label_file"), group[0])
-        sources = "+".join(dict.fromkeys(r.source for r in group))
-        description = next((r.description for r in group if r.description), "")
-        merged.append(replace(chosen, source=sources, description=description))
-    return merged
-
-
 def _add(words: Dict[str, Tuple[float, str]], token: str, weight: float, origin: str) -> None:
     if token not in words or words[token][0] < weight:
         words[token] = (weight, origin)
 
 
-@dataclass
-class RankedRegion:
-    region: Region
-    score: float
-    explanation: str
-
-
-@dataclass
-class Recommendation:
-    """Ranked regions for a phrase. `matched` False: no labelled place matches the phrase
-    (`results` empty; `closest` holds the best-scoring region anyway, `best_score` its score)."""
-
-    phrase: str
-    results: List[RankedRegion]
-    oov_words: List[str] = field(default_factory=list)
-    fallbacks: List[str] = field(default_factory=list)
-    matched: bool = True
-    best_score: float = float("nan")
-    closest: List[RankedRegion] = field(default_factory=list)
-    # How likely the first region is the place meant (0..1; nan: the ranking has no
-    # calibration); `sure` False: below the confident level, the ranking is a best guess.
-    confidence: float = float("nan")
-    sure: bool = True
-
-
-class RegionRecommender:
+class WordMatcher:
     """Ranks labelled regions for a phrase.
 
     Args:
@@ -318,11 +174,11 @@ class RegionRecommender:
         self._vectors: Dict[str, Optional[np.ndarray]] = {}
         self.name_text_weight = name_text_weight if wordnet is not None else 0.0
         # The same ranking on the label names alone (its share: name_text_weight).
-        self._names: Optional[RegionRecommender] = None
+        self._names: Optional[WordMatcher] = None
         if self.name_text_weight:
-            self._names = RegionRecommender(embed_words, use_spelling=use_spelling, method=method,
-                                            weights=weights, min_spelling=min_spelling,
-                                            hubness=hubness, number_words=number_words)
+            self._names = WordMatcher(embed_words, use_spelling=use_spelling, method=method,
+                                      weights=weights, min_spelling=min_spelling,
+                                      hubness=hubness, number_words=number_words)
 
     def set_regions(self, regions: Sequence[Region]) -> None:
         """Use these regions from now on (label words are expanded and embedded once)."""
