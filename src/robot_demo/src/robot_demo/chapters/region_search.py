@@ -9,7 +9,8 @@ from robot_sim.building import generate_building
 TITLE = "Where is ...? Phrases to labelled regions (embedding_server + region_recommender)"
 PHRASES = ["drinking fountain", "somewhere to print a poster", "I need coffee",
            "a place to take a nap", "classroom 102", "wash my hands", "where are the microscopes",
-           "meeting room", "a snack", "the printerz room", "the parking garage"]
+           "meeting room", "a snack", "the printerz room", "the parking garage",
+           "visit a patient"]  # the last two: places this building does not have
 
 
 def run(demo) -> None:
