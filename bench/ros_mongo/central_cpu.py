@@ -8,10 +8,10 @@ server, by the way its documents travel.
 A real Apache CouchDB 3.5 node (../shared/couchdb, started in a temporary folder on free ports, a
 database member account writing) takes `--seconds` (20) of the standard load's odometry (1 kHz
 nav_msgs/Odometry) and camera images (30 Hz 640x480 rgb8), built as the recorder builds them
-(ros_mongo.record_builder, ~decode full) and written as ros_mongo's CouchDB backend writes them:
+(ros_mongo.recording.record_builder, ~decode full) and written as ros_mongo's CouchDB backend writes them:
 
 - odometry, a document per message (batches of 500, `_bulk_docs`), and as chunks
-  (ros_mongo.chunks: one document per second or per 1000 messages, the bytes as one attachment);
+  (ros_mongo.storage.chunks: one document per second or per 1000 messages, the bytes as one attachment);
 - both again with the server's `[couchdb] attachment_stream_buffer_size` at 1 MB (default 4 KB: the
   size of the pieces an attachment is written in);
 - images, three ways the server takes a binary payload: base64 inside `_bulk_docs` JSON (inline
@@ -44,12 +44,12 @@ from bench_publisher import samples  # noqa: E402 - after the path set-up
 
 from ros_harness.apache_couchdb import ApacheCouchDB, beam_cpu_seconds, shared_couchdb_dir  # noqa: E402
 from ros_mongo import open_store  # noqa: E402
-from ros_mongo.backends.couch import message_rev  # noqa: E402
-from ros_mongo.chunks import CHUNK_SPAN, ChunkRecord  # noqa: E402
-from ros_mongo.decoding import DecodePolicy  # noqa: E402
-from ros_mongo.documents import message_doc  # noqa: E402
-from ros_mongo.record_builder import RecordBuilder  # noqa: E402
+from ros_mongo.messages.decoding import DecodePolicy  # noqa: E402
+from ros_mongo.recording.record_builder import RecordBuilder  # noqa: E402
 from ros_mongo.records import TopicInfo  # noqa: E402
+from ros_mongo.storage.chunks import CHUNK_SPAN, ChunkRecord  # noqa: E402
+from ros_mongo.storage.couch import message_rev  # noqa: E402
+from ros_mongo.storage.documents import message_doc  # noqa: E402
 
 T0 = 1_800_000_000
 

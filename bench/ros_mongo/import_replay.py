@@ -5,7 +5,7 @@ from ros_mongo_bench_lib import TOPICS, Arrivals, gap_errors, raw_bulk_rate, rec
 
 from ros_harness import ManagedProcess, RosLaunch, wait_until
 from ros_mongo import open_store
-from ros_mongo.bagio import import_bag
+from ros_mongo.files.bagio import import_bag
 
 
 def say(text=""):
@@ -20,7 +20,7 @@ def bench_import(bag, urls, raw_rate=True):
     if raw_rate:  # the import as the ros_mongo_bag command line runs it (not for --only-replay, so
         # the replay's measuring subscriber is the same in runs of versions with and without it)
         try:
-            from ros_mongo.allocator import keep_freed_memory
+            from ros_mongo.recording.allocator import keep_freed_memory
             keep_freed_memory()
         except ImportError:  # a ros_mongo without it (comparing with an earlier version)
             pass

@@ -5,7 +5,7 @@ Configurations (the database servers run on this machine; the robot side is what
 robot in each configuration):
 - `remote_<backend>`: ros_mongo_server writing to a database on another machine (robot side: the
   recorder); `remote_couchdb_chunked` the same with odometry and scans stored as chunks
-  (`~chunk_topics`, ros_mongo.chunks);
+  (`~chunk_topics`, ros_mongo.storage.chunks);
 - `fleet_default`: launch/fleet.launch as shipped, straight to the central CouchDB database with
   the spool as the buffer (robot side: the recorder);
 - `fleet_local_store`: fleet.launch local_db:=true: a local pouchdb-server and the replicator

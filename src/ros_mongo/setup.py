@@ -2,4 +2,7 @@
 from catkin_pkg.python_setup import generate_distutils_setup
 from setuptools import setup
 
-setup(**generate_distutils_setup(packages=["ros_mongo", "ros_mongo.backends"], package_dir={"": "src"}))
+PACKAGES = ["ros_mongo"] + [f"ros_mongo.{group}" for group in
+                            ("compat", "files", "fleet", "messages", "recording", "replay", "storage")]
+
+setup(**generate_distutils_setup(packages=PACKAGES, package_dir={"": "src"}))

@@ -20,7 +20,7 @@ from robot_common.errors import ConfigError
 from robot_common.msg import ObjectObservation
 from ros_harness import PouchDBServer, wait_until
 from ros_mongo import open_store
-from ros_mongo.replication import CouchDatabase, PushReplication
+from ros_mongo.fleet.replication import CouchDatabase, PushReplication
 
 LONG = 150.0  # seconds: roslaunch start-up and replication on a busy machine
 OBSERVATIONS = "/igmm_layers/observations"

@@ -16,8 +16,8 @@ from std_msgs.msg import Header
 
 from ros_harness import wait_until
 from ros_mongo import BagError, cli, open_store, parse_query
-from ros_mongo.bagio import export_bag, import_bag, iter_bag
 from ros_mongo.cli import parse_args, run
+from ros_mongo.files.bagio import export_bag, import_bag, iter_bag
 
 pytestmark = pytest.mark.db
 

@@ -9,7 +9,7 @@ from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 
 from ros_mongo import open_store
-from ros_mongo.bagio import export_bag, import_bag, iter_bag
+from ros_mongo.files.bagio import export_bag, import_bag, iter_bag
 from ros_mongo.query import Query
 from ros_mongo.records import TopicInfo, make_record, new_message_id
 

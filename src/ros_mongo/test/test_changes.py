@@ -1,4 +1,4 @@
-"""ros_mongo.changes: following a database's `_changes` feed (real pouchdb-server and Apache
+"""ros_mongo.fleet.changes: following a database's `_changes` feed (real pouchdb-server and Apache
 CouchDB, no ROS)."""
 import queue
 import threading
@@ -10,8 +10,8 @@ from std_msgs.msg import String
 
 from ros_harness import ApacheCouchDB, PouchDBServer, wait_until
 from ros_mongo import open_store
-from ros_mongo.changes import ChangesFollower
-from ros_mongo.replication import ReplicationError, ReplicationUnavailable
+from ros_mongo.fleet.changes import ChangesFollower
+from ros_mongo.fleet.replication import ReplicationError, ReplicationUnavailable
 
 LONG = 120.0
 
@@ -27,7 +27,7 @@ def record(store, robot_id, first, count):
 
 
 def test_selector_rules_are_apache_couchdbs():
-    """The follower's selector means what it means to Apache CouchDB (ros_mongo.mango, checked
+    """The follower's selector means what it means to Apache CouchDB (ros_mongo.storage.mango, checked
     against the real server in test_mango.py): a present null is a value, a missing field fails
     everything but `$exists: false`."""
     follower = ChangesFollower("http://127.0.0.1:1/db", selector={"robot_id": None})

@@ -1,4 +1,4 @@
-"""Chunked topics (ros_mongo.chunks): many small messages of a topic in one CouchDB document, read
+"""Chunked topics (ros_mongo.storage.chunks): many small messages of a topic in one CouchDB document, read
 back message by message (real pouchdb-server through the couchdb fixtures, no ROS)."""
 import io
 import time
@@ -13,16 +13,17 @@ from std_msgs.msg import String
 
 from ros_harness import FaultProxy, wait_until
 from ros_mongo import open_store
-from ros_mongo.backends.couch import field_matcher
-from ros_mongo.bagio import export_file
-from ros_mongo.bounded_spool import BoundedSpool
-from ros_mongo.changes import ChangesFollower
-from ros_mongo.chunks import CHUNK_SPAN, Chunker, ChunkPolicy, ChunkRecord
+from ros_mongo.files.bagio import export_file
+from ros_mongo.fleet.changes import ChangesFollower
 from ros_mongo.query import Query
-from ros_mongo.recorder import Recorder
+from ros_mongo.recording.bounded_spool import BoundedSpool
+from ros_mongo.recording.chunker import Chunker, ChunkPolicy
+from ros_mongo.recording.recorder import Recorder
+from ros_mongo.recording.spool import _read_frame, frames, read_entries
 from ros_mongo.records import split_time
-from ros_mongo.replay import Replayer
-from ros_mongo.spool import _read_frame, frames, read_entries
+from ros_mongo.replay.replay import Replayer
+from ros_mongo.storage.chunks import CHUNK_SPAN, ChunkRecord
+from ros_mongo.storage.couch import field_matcher
 
 T0 = 1700000000.0
 N = 2300          # /odom at 1 kHz: 2.3 s, so chunks close by time and by count
@@ -85,7 +86,7 @@ def test_chunker_closes_by_span_count_and_time_going_back():
 
 def test_field_conditions_on_chunk_messages_mean_what_the_servers_make_them_mean():
     """A chunk's messages are matched with the selector the server gets for message documents
-    (ros_mongo.documents), evaluated as Apache CouchDB does (ros_mongo.mango)."""
+    (ros_mongo.storage.documents), evaluated as Apache CouchDB does (ros_mongo.storage.mango)."""
     fields = {"a": 1, "s": "x", "arr": [1.0, 5.0], "inf": "Infinity", "nan": "NaN", "n": None}
 
     def fields_match(msg, conditions):

@@ -22,10 +22,7 @@ from ros_mongo import (
     open_store,
     parse_query,
 )
-from ros_mongo.allocator import keep_freed_memory
-from ros_mongo.bounded_spool import BoundedSpool
-from ros_mongo.documents import query_conditions, to_selector
-from ros_mongo.msgtypes import (
+from ros_mongo.messages.msgtypes import (
     index_fields,
     message_class,
     reference_fields,
@@ -33,10 +30,13 @@ from ros_mongo.msgtypes import (
     to_fields,
 )
 from ros_mongo.params import RecorderParams, RetrieverParams, configured_query
-from ros_mongo.recorder import Recorder
+from ros_mongo.recording.allocator import keep_freed_memory
+from ros_mongo.recording.bounded_spool import BoundedSpool
+from ros_mongo.recording.recorder import Recorder
+from ros_mongo.recording.spool import Spool
 from ros_mongo.records import new_message_id, split_time
-from ros_mongo.replay import Replayer
-from ros_mongo.spool import Spool
+from ros_mongo.replay.replay import Replayer
+from ros_mongo.storage.documents import query_conditions, to_selector
 
 
 def serialized(msg) -> bytes:
@@ -253,7 +253,7 @@ def test_retriever_config_builds_its_query():
 def test_query_conditions_render_one_selector_for_both_databases():
     query = parse_query('{topics: [/a, /b], tags: [x], start_time: 1, end_time: 2, '
                         'fields: {pose.x: [0, 1], header.frame_id: map}}')
-    # message fields spelled out (ros_mongo.documents): a range holds for the value or one element,
+    # message fields spelled out (ros_mongo.storage.documents): a range holds for the value or one element,
     # numbers only; equality for the value or an element; all under one {"$or": [{"$and": ...}]}
     number = {"$gte": 0, "$lte": 1, "$type": "number"}
     assert to_selector(query_conditions(query)) == {

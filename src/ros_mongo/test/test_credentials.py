@@ -144,8 +144,8 @@ def test_bag_converter_never_puts_the_url_on_the_command_line(tmp_path):
 def test_one_parser_reads_the_userinfo_up_to_the_last_at_and_decodes_it():
     """Every CouchDB request goes through one client and one parser: a raw password holding '@',
     '/' and ':' ends at the last '@' before the path; a percent-encoded one is decoded."""
-    from ros_mongo.couch_client import CouchClient
-    from ros_mongo.replication import CouchDatabase
+    from ros_mongo.fleet.replication import CouchDatabase
+    from ros_mongo.storage.couch_client import CouchClient
 
     raw = "http://robot:a@b/c:d@db.example:5984/proxy/fleet"
     assert split_credentials(raw) == ("http://db.example:5984/proxy/fleet", ("robot", "a@b/c:d"))

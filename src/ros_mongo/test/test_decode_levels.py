@@ -7,9 +7,9 @@ from ros_mongo_samples import serialized
 from sensor_msgs.msg import Image, LaserScan
 
 from ros_mongo import open_store
-from ros_mongo.bounded_spool import BoundedSpool
-from ros_mongo.decoding import DecodePolicy
-from ros_mongo.recorder import Recorder
+from ros_mongo.messages.decoding import DecodePolicy
+from ros_mongo.recording.bounded_spool import BoundedSpool
+from ros_mongo.recording.recorder import Recorder
 from ros_mongo.records import split_time
 
 N = 6

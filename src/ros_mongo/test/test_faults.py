@@ -24,14 +24,14 @@ from std_msgs.msg import String
 
 from ros_harness import FaultProxy, wait_until
 from ros_mongo import TopicInfo, make_record, open_store
-from ros_mongo.bagio import export_bag
-from ros_mongo.bounded_spool import BoundedSpool
 from ros_mongo.errors import StoreError, StoreRefused
-from ros_mongo.quarantine import import_quarantine
+from ros_mongo.files.bagio import export_bag
 from ros_mongo.query import parse_query
-from ros_mongo.recorder import Recorder
+from ros_mongo.recording.bounded_spool import BoundedSpool
+from ros_mongo.recording.quarantine import import_quarantine
+from ros_mongo.recording.recorder import Recorder
+from ros_mongo.recording.spool import read_entries
 from ros_mongo.records import MessageRecord, split_time
-from ros_mongo.spool import read_entries
 
 pytestmark = [pytest.mark.db]
 

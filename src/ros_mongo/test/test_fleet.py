@@ -23,15 +23,15 @@ from std_srvs.srv import Trigger
 
 from ros_harness import LaunchSet, PouchDBServer, RosCore, wait_until
 from ros_mongo import TopicInfo, make_record, open_store
-from ros_mongo.records import split_time
-from ros_mongo.replication import (
+from ros_mongo.fleet.replication import (
     POUCHDB_BATCH_SIZE,
     CouchDatabase,
     PushReplication,
     ReplicationError,
     ReplicationSpec,
 )
-from ros_mongo.retention import Retention
+from ros_mongo.fleet.retention import Retention
+from ros_mongo.records import split_time
 
 FIRST = 3 * POUCHDB_BATCH_SIZE  # messages replicated before central stops
 

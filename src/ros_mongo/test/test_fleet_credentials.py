@@ -19,7 +19,7 @@ from std_msgs.msg import String
 
 from ros_harness import PouchDBServer, wait_until
 from ros_mongo import open_store
-from ros_mongo.changes import ChangesFollower
+from ros_mongo.fleet.changes import ChangesFollower
 from ros_mongo.urls import PASSWORD_ENV, USER_ENV, with_credentials
 
 pytestmark = pytest.mark.db

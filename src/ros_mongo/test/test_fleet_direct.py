@@ -20,7 +20,7 @@ from std_msgs.msg import String
 
 from ros_harness import FaultProxy, LaunchSet, PouchDBServer, RosCore, wait_until
 from ros_mongo import TopicInfo, make_record, open_store
-from ros_mongo.changes import ChangesFollower
+from ros_mongo.fleet.changes import ChangesFollower
 from ros_mongo.records import split_time
 
 LONG = 300.0  # seconds: generous, the machine is busy

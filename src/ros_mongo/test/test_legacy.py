@@ -8,8 +8,7 @@ import pytest
 from sensor_msgs.msg import LaserScan
 
 from robot_common.errors import ConfigError
-from ros_mongo.errors import QueryError
-from ros_mongo.legacy import (
+from ros_mongo.compat.legacy import (
     LegacyDocumentError,
     legacy_config,
     legacy_db_url,
@@ -18,6 +17,7 @@ from ros_mongo.legacy import (
     original_document,
     original_message,
 )
+from ros_mongo.errors import QueryError
 from ros_mongo.params import RecorderParams, RetrieverParams
 from ros_mongo.query import Query, parse_query
 from ros_mongo.records import StoredMessage

@@ -1,4 +1,4 @@
-"""The selector evaluator (ros_mongo.mango) answers as Apache CouchDB does: the same selectors run
+"""The selector evaluator (ros_mongo.storage.mango) answers as Apache CouchDB does: the same selectors run
 on the real server (`_find`, ros_harness `apache_couchdb`; skipped where ../shared/couchdb is
 absent) and on the evaluator must select the same documents. The expected sets are the server's
 answers, never the evaluator's; the unit test below has them worked out by hand."""
@@ -7,7 +7,7 @@ import uuid
 import pytest
 import requests
 
-from ros_mongo.mango import SelectorError, compile_selector, matches
+from ros_mongo.storage.mango import SelectorError, compile_selector, matches
 
 # Documents with every shape a selector treats differently: missing and null fields, numbers
 # written as integers and floats, booleans, strings, arrays (empty, mixed, of objects), objects.

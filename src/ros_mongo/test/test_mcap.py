@@ -14,9 +14,9 @@ from std_msgs.msg import String
 from test_bag import bag_contents, write_bag
 
 from ros_mongo import BagError, open_store, parse_query
-from ros_mongo.bagio import export_file, import_file, iter_file
 from ros_mongo.cli import parse_args, run
-from ros_mongo.mcapio import McapReader
+from ros_mongo.files.bagio import export_file, import_file, iter_file
+from ros_mongo.files.mcapio import McapReader
 
 pytestmark = pytest.mark.db
 

@@ -17,11 +17,11 @@ from std_msgs.msg import String, UInt64
 
 from ros_harness import ManagedProcess, wait_until
 from ros_mongo import open_store
-from ros_mongo.backends.mongo import INDEXES
-from ros_mongo.bagio import export_bag, iter_bag
+from ros_mongo.files.bagio import export_bag, iter_bag
 from ros_mongo.query import Query
 from ros_mongo.records import TopicInfo, make_record
-from ros_mongo.replay import Replayer
+from ros_mongo.replay.replay import Replayer
+from ros_mongo.storage.mongo import INDEXES
 
 pytestmark = pytest.mark.db
 

@@ -1,5 +1,5 @@
 """One query suite, run on both real servers: every supported field operator gives the answer the
-semantics in ros_mongo.documents define (missing fields, scalars against arrays, nulls, types,
+semantics in ros_mongo.storage.documents define (missing fields, scalars against arrays, nulls, types,
 the "NaN"/"Infinity" encodings). The expected answers are written by hand from those rules."""
 import math
 

@@ -6,10 +6,10 @@ from ros_mongo_samples import serialized
 from sensor_msgs.msg import Image
 
 from ros_mongo import TopicInfo, make_record
-from ros_mongo.bounded_spool import BoundedSpool, DropPolicy
 from ros_mongo.errors import SpoolError
+from ros_mongo.recording.bounded_spool import BoundedSpool, DropPolicy
+from ros_mongo.recording.spool import SpoolFull
 from ros_mongo.records import split_time
-from ros_mongo.spool import SpoolFull
 
 ODOM = TopicInfo.of_class("/odom", Odometry)
 IMAGE = TopicInfo.of_class("/camera/rgb/image_raw", Image)

@@ -13,9 +13,9 @@ from std_msgs.msg import String
 from ros_harness import ApacheCouchDB, PouchDBServer, wait_until
 from ros_harness.apache_couchdb import _free_base
 from ros_mongo import open_store
-from ros_mongo.changes import ChangesFollower
 from ros_mongo.errors import StoreRefused
-from ros_mongo.replication import CouchDatabase, PendingTracker, PushReplication, ReplicationRefused
+from ros_mongo.fleet.changes import ChangesFollower
+from ros_mongo.fleet.replication import CouchDatabase, PendingTracker, PushReplication, ReplicationRefused
 
 pytestmark = pytest.mark.db
 LONG = 120.0

@@ -20,7 +20,7 @@ from robot_common.maps import FREE, GridMap, save_map
 from robot_common.msg import PeopleCount
 from ros_harness import PouchDBServer, wait_until
 from ros_mongo import open_store
-from ros_mongo.replication import (
+from ros_mongo.fleet.replication import (
     CouchDatabase,
     PushReplication,
 )

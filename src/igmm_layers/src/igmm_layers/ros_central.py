@@ -1,7 +1,7 @@
 """Fleet learning of the layer server (~source central): every robot's detections, and optionally
 its saved cluster sets, read from the central fleet database's `_changes` feed.
 
-`CentralSource(server)` follows the feed (ros_mongo.changes.ChangesFollower) in a thread of its
+`CentralSource(server)` follows the feed (ros_mongo.fleet.changes.ChangesFollower) in a thread of its
 own and hands each ObjectObservation document to the server's queue with the robot that recorded
 it; a saved ClusterSet (~central_clusters) becomes, per cluster, as many observations as its
 support (at most MAX_CLUSTER_WEIGHT) at its mean, with a size whose box spread matches the

@@ -16,7 +16,7 @@ from ros_mongo.errors import (
 )
 from ros_mongo.query import Query, parse_query
 from ros_mongo.records import MessageRecord, StoredMessage, TopicInfo, make_record
-from ros_mongo.store import MessageStore, open_store, redact_url
+from ros_mongo.storage.store import MessageStore, open_store, redact_url
 
 __all__ = [
     "open_store",

@@ -28,11 +28,7 @@ import sys
 from pathlib import Path
 from typing import List, Optional
 
-from ros_mongo.allocator import keep_freed_memory
-from ros_mongo.bagio import BATCH_BYTES, export_file, import_file
-from ros_mongo.errors import StoreError
-from ros_mongo.formats import format_names
-from ros_mongo.legacy import (
+from ros_mongo.compat.legacy import (
     DEFAULT_BAG_NAME,
     LEGACY_COLLECTION,
     LEGACY_DATABASE,
@@ -40,8 +36,12 @@ from ros_mongo.legacy import (
     legacy_overrides,
     migrate_documents,
 )
+from ros_mongo.errors import StoreError
+from ros_mongo.files.bagio import BATCH_BYTES, export_file, import_file
+from ros_mongo.files.formats import format_names
 from ros_mongo.query import parse_query, query_from_mapping
-from ros_mongo.store import open_store
+from ros_mongo.recording.allocator import keep_freed_memory
+from ros_mongo.storage.store import open_store
 from ros_mongo.urls import PASSWORD_ENV, password_warning, redact_url
 
 __all__ = ["main"]
@@ -244,7 +244,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     argv = [a for a in argv if not re.match(r"^__\w+:=", a)]  # roslaunch's __name:= and __log:=
     args = parse_args(argv)
-    keep_freed_memory()  # image-sized buffers reuse memory instead of fresh pages (ros_mongo.allocator)
+    keep_freed_memory()  # image-sized buffers reuse memory instead of fresh pages (recording.allocator)
     try:
         run(args)
     except StoreError as err:

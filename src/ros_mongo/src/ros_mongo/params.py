@@ -7,18 +7,20 @@ config/ are generated from these classes (`python -m robot_common.config_files -
 """
 import re
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Sequence
+from typing import TYPE_CHECKING, Any, Dict, List, Optional, Sequence
 
 from robot_common.errors import ConfigError
 from robot_common.params import NodeConfig, param
-from ros_mongo.bounded_spool import DROPPABLE_TYPES, DropPolicy
-from ros_mongo.changes import ChangesFollower
-from ros_mongo.chunks import ChunkPolicy
-from ros_mongo.decoding import DECODE_LEVELS, DecodePolicy
 from ros_mongo.errors import QueryError
+from ros_mongo.messages.decoding import DECODE_LEVELS, DecodePolicy
 from ros_mongo.query import Query, parse_query, query_from_mapping
-from ros_mongo.spool import DEFAULT_MAX_BYTES, DEFAULT_MIN_FREE_BYTES
+from ros_mongo.recording.chunker import ChunkPolicy
+from ros_mongo.recording.limits import DEFAULT_MAX_BYTES, DEFAULT_MIN_FREE_BYTES, DROPPABLE_TYPES
 from ros_mongo.urls import redact_url, with_credentials
+
+if TYPE_CHECKING:  # the spool and the changes follower load only when a node asks for them
+    from ros_mongo.fleet.changes import ChangesFollower
+    from ros_mongo.recording.bounded_spool import DropPolicy
 
 __all__ = ["RecorderParams", "RetrieverParams", "ReplicatorParams", "CentralSourceParams", "SOURCES",
            "ORIGINAL_TOPICS", "ORIGINAL_TAGS", "configured_query", "compile_patterns"]
@@ -130,8 +132,9 @@ class RecorderParams(NodeConfig):
         except ValueError as err:
             raise ConfigError(f"~chunk_rate / ~chunk_messages: {err}") from None
 
-    def drop_policy(self) -> DropPolicy:
+    def drop_policy(self) -> "DropPolicy":
         """Which topics lose their oldest messages first when the spool is full."""
+        from ros_mongo.recording.bounded_spool import DropPolicy
         return DropPolicy(self.spool_drop_types, self.spool_drop_topics)
 
     def store_options(self) -> Dict[str, object]:
@@ -260,7 +263,7 @@ class ReplicatorParams(NodeConfig):
                                           "if not in central_tls_cert_file")
 
     def central_tls(self) -> Dict[str, str]:
-        """The TLS options of the central database for ros_mongo.couch_client (given ones only)."""
+        """The TLS options of the central database for ros_mongo.storage.couch_client (given ones only)."""
         given = (("tls_ca_file", self.central_tls_ca_file), ("tls_cert_file", self.central_tls_cert_file),
                  ("tls_key_file", self.central_tls_key_file))
         return {key: value for key, value in given if value}
@@ -309,4 +312,5 @@ class CentralSourceParams(NodeConfig):
         topics = self.central_topics if topics is None else topics
         if topics:
             selector["topic"] = {"$in": list(topics)}
+        from ros_mongo.fleet.changes import ChangesFollower
         return ChangesFollower(url, selector=selector, since=since)

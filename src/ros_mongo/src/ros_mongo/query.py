@@ -4,7 +4,7 @@ Message-field conditions use the operators CouchDB Mango and MongoDB share: a pl
 equality, a mapping may use $eq $ne $gt $gte $lt $lte $in $nin $exists, and a two-element list
 [low, high] means low <= value <= high. Field paths are dotted ("header.frame_id",
 "pose.pose.position.x", "ranges.0"). What each operator matches (missing fields, arrays, nulls,
-"NaN"/"Infinity") is defined once, the same for both backends: see `ros_mongo.documents`.
+"NaN"/"Infinity") is defined once, the same for both backends: see `ros_mongo.storage.documents`.
 Range bounds are numbers or strings, all of one kind per field.
 """
 import logging

@@ -19,9 +19,9 @@ from typing import Any, Callable, Dict, List, Optional, Sequence
 
 import genpy
 
-import ros_mongo.msgtypes as msgtypes
-from ros_mongo.decoding import stamp_from_bytes
+import ros_mongo.messages.msgtypes as msgtypes
 from ros_mongo.errors import UnknownTypeError
+from ros_mongo.messages.decoding import stamp_from_bytes
 
 __all__ = ["TopicInfo", "MessageRecord", "StoredMessage", "make_record", "record_from_bytes",
            "new_message_id", "split_time", "id_part"]
@@ -120,7 +120,7 @@ def make_record(topic: str, msg_class: type, raw: bytes, *, receive: Optional[ge
     """A record for the serialized message `raw` of `msg_class` received at `receive`.
 
     The fields are decoded from `raw` (or taken from `message` when given) at the `decode` level
-    (ros_mongo.decoding: full, index or raw); bytes that do not decode are still stored, with no
+    (ros_mongo.messages.decoding: full, index or raw); bytes that do not decode are still stored, with no
     fields.
     """
     receive = receive if receive is not None else split_time(time.time())

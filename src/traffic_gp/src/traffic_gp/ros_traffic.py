@@ -23,8 +23,8 @@ from robot_common.maps import load_map
 from robot_common.msg import PeopleCount
 from robot_common.ros_maps import grid_to_msg, msg_to_grid
 from robot_common.ros_node import read_config
-from ros_mongo.changes import ChangesFollower
 from ros_mongo.errors import StoreError
+from ros_mongo.fleet.changes import ChangesFollower
 from ros_mongo.urls import redact_url, warn_password_in_url
 from traffic_gp.errors import TrafficError
 from traffic_gp.learning import Learner

@@ -8,7 +8,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 
 from robot_demo.waits import wait_until
 from ros_mongo import open_store, parse_query
-from ros_mongo.bagio import export_bag
+from ros_mongo.files.bagio import export_bag
 
 TITLE = "Recording, querying and replaying robot data (ros_mongo)"
 RECORD_SECONDS = 5.0

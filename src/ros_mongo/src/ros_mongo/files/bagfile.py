@@ -1,4 +1,4 @@
-"""ROS 1 bags (rosbag's own reader and writer) in the `ros_mongo.formats` shape.
+"""ROS 1 bags (rosbag's own reader and writer) in the `ros_mongo.files.formats` shape.
 
 Reading an unindexed bag (left by a `rosbag record` that crashed or was killed: a `.bag.active`
 file, or a bag whose index was cut off) rebuilds the index in memory the way `rosbag reindex`
@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Dict, Iterator, Optional, Sequence, Tuple
 
 from ros_mongo.errors import BagError
-from ros_mongo.formats import (
+from ros_mongo.files.formats import (
     FileFormat,
     FileReader,
     FileWriter,

@@ -1,8 +1,8 @@
 """Log files (ROS 1 bags, MCAP) to the database and back, losslessly: topics, types, md5sums,
 definitions, connection headers (latching, callerid), receive times and the exact serialized
 bytes. The formats sit behind one reader / writer shape and a registry by name
-(`ros_mongo.formats`): `ros_mongo.bagfile` (bags, also unindexed ones) and `ros_mongo.mcapio`
-(MCAP, what Foxglove opens).
+(`ros_mongo.files.formats`): `ros_mongo.files.bagfile` (bags, also unindexed ones) and
+`ros_mongo.files.mcapio` (MCAP, what Foxglove opens).
 
 Importing decodes each message for the queryable fields on the main thread while a writer thread
 sends the previous batch to the database (one bulk request per batch).
@@ -36,13 +36,13 @@ from typing import Dict, Iterator, List, Optional, Sequence, Set, Tuple, Union
 
 import genpy
 
-from ros_mongo import bagfile, mcapio  # noqa: F401 - they register the bag and MCAP formats
-from ros_mongo.backends.base import PreparedRecords
 from ros_mongo.errors import BagError, StoreError, UnknownTypeError
-from ros_mongo.formats import Recovery, format_for_path, format_of_file, iter_file
+from ros_mongo.files import bagfile, mcapio  # noqa: F401 - they register the bag and MCAP formats
+from ros_mongo.files.formats import Recovery, format_for_path, format_of_file, iter_file
 from ros_mongo.query import Query
 from ros_mongo.records import MessageRecord, TopicInfo, make_record, new_message_id
-from ros_mongo.store import MessageStore
+from ros_mongo.storage.base import PreparedRecords
+from ros_mongo.storage.store import MessageStore
 
 __all__ = ["import_file", "export_file", "iter_file", "import_bag", "export_bag", "iter_bag",
            "TransferResult", "BATCH_BYTES", "BATCH_SIZE"]

@@ -7,8 +7,8 @@ wraps them. A writer refuses to overwrite an existing file (unless told to), wri
 `<path>.partial` and renames it only once the file is complete, so an interrupted export never
 leaves a half-written file under the requested name.
 
-Formats register themselves with `register_format` (as `ros_mongo.bagfile` and
-`ros_mongo.mcapio` do when imported); `format_of_file` recognises a file by its first bytes and
+Formats register themselves with `register_format` (as `ros_mongo.files.bagfile` and
+`ros_mongo.files.mcapio` do when imported); `format_of_file` recognises a file by its first bytes and
 `format_for_path` picks the format of a file to write by name or suffix.
 """
 import hashlib

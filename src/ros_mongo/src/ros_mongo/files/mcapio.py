@@ -1,4 +1,4 @@
-"""MCAP files (what Foxglove opens) with ROS 1 messages, in the `ros_mongo.formats` shape.
+"""MCAP files (what Foxglove opens) with ROS 1 messages, in the `ros_mongo.files.formats` shape.
 
 Written as the MCAP `ros1` profile describes it: one schema per message type and definition
 (encoding `ros1msg`, the full message definition text as in a bag's connection header), one
@@ -21,7 +21,7 @@ from typing import Dict, Iterator, Optional, Sequence, Tuple
 import genpy
 
 from ros_mongo.errors import BagError, UnknownTypeError
-from ros_mongo.formats import (
+from ros_mongo.files.formats import (
     FileFormat,
     FileReader,
     FileWriter,
@@ -30,7 +30,7 @@ from ros_mongo.formats import (
     fingerprint_of,
     register_format,
 )
-from ros_mongo.msgtypes import message_class
+from ros_mongo.messages.msgtypes import message_class
 
 __all__ = ["McapReader", "McapWriter", "MCAP_MAGIC"]
 

@@ -6,7 +6,7 @@ then `poll()` (one request: the next page of changes) or `follow(stop_event)` (f
 every `poll_interval` seconds once caught up, reconnecting with back-off while the server is
 down). No long-poll: pouchdb-server ignores the long-poll `timeout` and holds the request until a
 change comes, which would also keep a follower from stopping. Each selected change comes as a
-`FeedItem`: the decoded `StoredMessage` (through ros_mongo.documents, as the CouchDB backend
+`FeedItem`: the decoded `StoredMessage` (through ros_mongo.storage.documents, as the CouchDB backend
 reads it) and `seq`, the feed position just after it; save the `seq` of the last item the
 learner has folded in, and a new follower started `since` it yields only later changes.
 Order: the server's feed order, kept as it is (so that every `seq` resumes exactly): write order
@@ -14,13 +14,13 @@ on pouchdb-server; Apache CouchDB interleaves the feeds of a database's shards (
 also on one node), so there each change comes once, but two messages may come in another order
 than they were written. A learner that needs time order sorts by `receive_time`, or the admin
 creates the database with one shard (`PUT /db?q=1`).
-A chunk (ros_mongo.chunks: many messages of a topic in one document) yields its messages one by
+A chunk (ros_mongo.storage.chunks: many messages of a topic in one document) yields its messages one by
 one, with their own ids; the position after a message inside a chunk is
 `{"since": <the feed position before the chunk>, "chunk": <its id>, "done": <messages yielded>}`
 (JSON-able like a sequence), so a follower started from it yields the rest of that chunk, then
 later changes.
 
-The selector is a Mango selector evaluated here on each document (`selects`, ros_mongo.mango:
+The selector is a Mango selector evaluated here on each document (`selects`, ros_mongo.storage.mango:
 the answer Apache CouchDB gives for it; e.g. `$eq null` matches a present null only). It is not
 sent to the server: `_changes?filter=_selector` is documented for CouchDB >= 2 but kills
 pouchdb-server, so both servers get the plain feed and the follower drops the documents it does
@@ -28,7 +28,7 @@ not want. Deletions (a robot's retention deletes only locally, but an operator m
 centrally) and design documents are never selected.
 
 Errors: `poll` raises ReplicationUnavailable (retry later) / ReplicationRefused /
-ReplicationError (ros_mongo.replication); `follow` retries all of them, with back-off, and keeps
+ReplicationError (ros_mongo.fleet.replication); `follow` retries all of them, with back-off, and keeps
 the last one in `last_error`. Messages never contain credentials (URLs redacted).
 """
 import logging
@@ -37,13 +37,13 @@ from typing import Any, Dict, Iterator, List, NamedTuple, Optional
 
 import pybase64
 
-from ros_mongo.backends.couch import CouchStore
-from ros_mongo.chunks import expand
-from ros_mongo.documents import stored_message
 from ros_mongo.errors import StoreError
-from ros_mongo.mango import SelectorError, compile_selector
+from ros_mongo.fleet.replication import CouchDatabase, ReplicationError
 from ros_mongo.records import StoredMessage
-from ros_mongo.replication import CouchDatabase, ReplicationError
+from ros_mongo.storage.chunks import expand
+from ros_mongo.storage.couch import CouchStore
+from ros_mongo.storage.documents import stored_message
+from ros_mongo.storage.mango import SelectorError, compile_selector
 
 __all__ = ["FeedItem", "ChangesFollower"]
 
@@ -60,7 +60,7 @@ class FeedItem(NamedTuple):
 class ChangesFollower:
     """Follows the `_changes` feed of the CouchDB database at `url` (credentials allowed in `url`;
     never shown) from `since`, yielding the message documents that match `selector`. `tls`:
-    tls_ca_file, tls_cert_file, tls_key_file, tls_verify (ros_mongo.couch_client)."""
+    tls_ca_file, tls_cert_file, tls_key_file, tls_verify (ros_mongo.storage.couch_client)."""
 
     def __init__(self, url: str, *, selector: Optional[Dict[str, Any]] = None, since: Any = 0,
                  poll_interval: float = 1.0, page: int = 200, timeout: float = 10.0,

@@ -22,7 +22,7 @@ filter runs inside the server; the HTTP `_changes?filter=_selector` path that ca
 pouchdb-server is not used) and is documented for CouchDB >= 2. Design documents (Mango indexes,
 which every robot creates with its own revision and a CouchDB member account may not write) and
 deletions (tombstones carry no `kind`) never match, so the central database gets no conflicting
-index documents, and a robot's retention (ros_mongo.retention) never deletes anything centrally.
+index documents, and a robot's retention (ros_mongo.fleet.retention) never deletes anything centrally.
 
 How far behind (`PendingTracker`): follows the local `_changes` feed and asks the central database
 with `_revs_diff` which of the selected documents it holds (same `_id` and `_rev`). Pending = the
@@ -30,11 +30,13 @@ selected documents whose revision is not central yet; lag = their number and the
 (seconds since this tracker first saw it). It keeps its own checkpoint in the local `_local/`
 document `ros_mongo_tracker-<replication id>` (written only up to the oldest pending document).
 
-Errors: `ReplicationUnavailable` (retry later: unreachable, timeout, 5xx, 429),
-`ReplicationRefused` (the operator must act: 401, 403, a database the account may not create),
-`ReplicationError` (anything else, and bad arguments). Messages never contain credentials: URLs
-are redacted and server answers scrubbed. The central password is kept in the `_replicator`
-document of the robot's store (as CouchDB itself does): protect that store.
+Requests go through the one CouchDB client (ros_mongo.storage.couch_client: credentials, TLS,
+one error mapping), raising this module's errors: `ReplicationUnavailable` (retry later:
+unreachable, timeout, 5xx, 429), `ReplicationRefused` (the operator must act: 401, 403, a TLS
+failure, a database the account may not create), `ReplicationError` (anything else, and bad
+arguments). Messages never contain credentials: URLs are redacted and server answers scrubbed.
+The central password is kept in the `_replicator` document of the robot's store (as CouchDB
+itself does): protect that store.
 """
 import base64
 import json
@@ -46,8 +48,8 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
 from urllib.parse import quote
 
-from ros_mongo.couch_client import CouchClient, ErrorFamily
 from ros_mongo.errors import StoreError, StoreRefused, StoreUnavailable
+from ros_mongo.storage.couch_client import CouchClient, ErrorFamily
 from ros_mongo.urls import scrub
 
 __all__ = ["ReplicationError", "ReplicationUnavailable", "ReplicationRefused", "CouchDatabase",
@@ -79,7 +81,7 @@ REPLICATION_ERRORS = ErrorFamily(ReplicationError, ReplicationUnavailable, Repli
 
 
 class CouchDatabase(CouchClient):
-    """One database on a CouchDB-API server (ros_mongo.couch_client), raising the replication's
+    """One database on a CouchDB-API server (ros_mongo.storage.couch_client), raising the replication's
     errors; `url` is the server root (with any proxy prefix). TLS options as CouchClient's."""
 
     def __init__(self, url: str, *, timeout: float = 10.0, **tls):
@@ -289,9 +291,6 @@ class PushReplication:
             return None
         except ReplicationError as err:
             return err
-
-    def central_reachable(self) -> bool:
-        return self.central_problem() is None
 
 
 @dataclass

@@ -10,7 +10,7 @@ Contract: a message document of the robot's store is deleted only when
 Topic documents and design documents are never deleted. A document changed between the check and
 the delete is kept (the delete conflicts) and looked at again in a later pass. Any error of either
 server ends the pass with nothing more deleted (ReplicationError subclasses; see
-ros_mongo.replication).
+ros_mongo.fleet.replication).
 
 The delete leaves a tombstone (pouchdb-server has no `_purge`). Tombstones never reach the
 central database: the replication's selector needs `kind`, which a tombstone lacks. The disk
@@ -25,7 +25,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Dict, List, Optional
 
-from ros_mongo.replication import CouchDatabase, ReplicationError, ReplicationSpec
+from ros_mongo.fleet.replication import CouchDatabase, ReplicationError, ReplicationSpec
 
 __all__ = ["RetentionResult", "Retention"]
 

@@ -1,4 +1,4 @@
-"""ROS layer of robot -> central replication: the ros_mongo_replicator node (see ros_mongo.replication)."""
+"""ROS layer of robot -> central replication: the ros_mongo_replicator node (fleet.replication)."""
 import os
 import socket
 import threading
@@ -10,8 +10,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from std_srvs.srv import Trigger, TriggerResponse
 
 from robot_common.ros_node import read_config
-from ros_mongo.params import ReplicatorParams
-from ros_mongo.replication import (
+from ros_mongo.fleet.replication import (
     CouchDatabase,
     PendingTracker,
     PushReplication,
@@ -19,7 +18,8 @@ from ros_mongo.replication import (
     ReplicationSpec,
     ReplicationStatus,
 )
-from ros_mongo.retention import Retention
+from ros_mongo.fleet.retention import Retention
+from ros_mongo.params import ReplicatorParams
 from ros_mongo.urls import warn_password_in_url, with_credentials
 
 __all__ = ["ReplicatorNode", "start"]
@@ -35,7 +35,8 @@ class ReplicatorNode:
     Parameters: `ReplicatorParams` (config/ros_mongo_replicator.yaml).
     Publishes: /diagnostics (diagnostic_msgs/DiagnosticArray), status "ros_mongo_replicator:
         <robot>": state, central_reachable, pending_docs, lag_docs, lag_seconds, confirmed,
-        retention_deleted, last_error (redacted), local, central (redacted URLs).
+        retention_deleted, last_error (redacted), local, central (redacted URLs); ERROR with the
+        reason while central refuses the account, fails TLS verification or cannot be reached.
     Services (std_srvs/Trigger): ~start (create the replication), ~stop (delete it; checkpoints
         stay), ~trigger (restart it now: it resumes from its checkpoint).
     The replication runs inside the robot's store: it goes on when this node stops.

@@ -122,7 +122,7 @@ def to_fields(msg, max_array_len: int = MAX_ARRAY_LEN) -> Dict[str, Any]:
 
 
 def index_fields(msg) -> Dict[str, Any]:
-    """The message's fields without any array (ros_mongo.decoding's `index` level)."""
+    """The message's fields without any array (ros_mongo.messages.decoding's `index` level)."""
     return _compiled(msg.__class__, True)(msg, 0)
 
 

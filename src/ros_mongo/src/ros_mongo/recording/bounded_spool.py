@@ -1,6 +1,6 @@
 """The recorder's outage buffer on disk: bounded, with a stated policy per topic when full (no ROS).
 
-A `BoundedSpool` holds two kinds of spool files (ros_mongo.spool's framed format):
+A `BoundedSpool` holds two kinds of spool files (ros_mongo.recording.spool's framed format):
 - the *kept* file (`<path>`): messages of every topic not named droppable, in order;
 - *droppable* segments (`<path>.drop.<n>`): messages of the droppable topics (by default camera
   images: `sensor_msgs/Image`, `sensor_msgs/CompressedImage`), in segments of about
@@ -27,13 +27,12 @@ from pathlib import Path
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 from ros_mongo.errors import SpoolError
+from ros_mongo.recording.limits import DEFAULT_MAX_BYTES, DEFAULT_MIN_FREE_BYTES, DROPPABLE_TYPES
+from ros_mongo.recording.spool import Spool, SpoolFull, frames
 from ros_mongo.records import MessageRecord, TopicInfo
-from ros_mongo.spool import DEFAULT_MAX_BYTES, DEFAULT_MIN_FREE_BYTES, Spool, SpoolFull, frames
 
 __all__ = ["BoundedSpool", "DropPolicy", "DROPPABLE_TYPES"]
 
-#: The message types dropped oldest-first when the spool is full (unless configured otherwise).
-DROPPABLE_TYPES = ("sensor_msgs/Image", "sensor_msgs/CompressedImage")
 _Key = Tuple[str, str, str, str]  # topic, type, md5sum, publisher
 _SEGMENT_RE = re.compile(r"\.drop\.(\d{8})$")
 _UNLIMITED = 1 << 62

@@ -2,11 +2,11 @@
 
 Only a single document the server refuses alone (after its batch was split down to it) lands here,
 e.g. CouchDB's 413 `document_too_large` when `max_document_size` is lower than the message. The
-file has the spool's framed format (ros_mongo.spool: a topic info before the first message of each
+file has the spool's framed format (ros_mongo.recording.spool: a topic info before the first message of each
 topic), so nothing is lost and it can be inspected and stored again once the cause is fixed:
 
-    python3 -m ros_mongo.quarantine list FILE
-    python3 -m ros_mongo.quarantine import FILE --db-url URL
+    python3 -m ros_mongo.recording.quarantine list FILE
+    python3 -m ros_mongo.recording.quarantine import FILE --db-url URL
 
 (or start the recorder with `~spool_path:=FILE`: it drains a spool-format file into the database).
 """
@@ -15,11 +15,11 @@ import sys
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple, Union
 
-from ros_mongo.chunks import ChunkRecord
 from ros_mongo.errors import DocumentsRejected, StoreError
+from ros_mongo.recording.spool import Spool, read_entries
 from ros_mongo.records import MessageRecord, TopicInfo
-from ros_mongo.spool import Spool, read_entries
-from ros_mongo.store import MessageStore, open_store
+from ros_mongo.storage.chunks import ChunkRecord
+from ros_mongo.storage.store import MessageStore, open_store
 
 __all__ = ["Quarantine", "import_quarantine", "main"]
 
@@ -66,7 +66,7 @@ def import_quarantine(path: Union[str, Path], store: MessageStore) -> Tuple[int,
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    parser = argparse.ArgumentParser(prog="python3 -m ros_mongo.quarantine",
+    parser = argparse.ArgumentParser(prog="python3 -m ros_mongo.recording.quarantine",
                                      description="list or store again a recorder's quarantine file")
     parser.add_argument("command", choices=["list", "import"])
     parser.add_argument("file")

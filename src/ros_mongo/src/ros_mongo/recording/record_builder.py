@@ -1,16 +1,16 @@
 """The recorder's records from received bytes (no ROS): each topic's message class, installed or
-generated from the definition its publisher sent, the topic's decode level (ros_mongo.decoding),
+generated from the definition its publisher sent, the topic's decode level (ros_mongo.messages.decoding),
 the tags and ids every message carries."""
 import logging
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import genpy
 
-import ros_mongo.msgtypes as msgtypes
-from ros_mongo.chunks import ChunkRecord
-from ros_mongo.decoding import DecodePolicy
+import ros_mongo.messages.msgtypes as msgtypes
 from ros_mongo.errors import UnknownTypeError
+from ros_mongo.messages.decoding import DecodePolicy
 from ros_mongo.records import MessageRecord, TopicInfo, make_record, new_message_id, record_from_bytes
+from ros_mongo.storage.chunks import ChunkRecord
 
 __all__ = ["RecordBuilder", "Key"]
 

@@ -21,7 +21,7 @@ unexpected shape, a bug) spools its batch, reports the failure and is restarted 
 spool refuses it (SpoolFull: size limit or minimum free space), or a quarantine write fails.
 
 What a SIGKILL can lose: only messages not yet written to the database or the spool, i.e. those
-received during the last `batch_period` (on chunked topics, ros_mongo.chunks: the last chunk's
+received during the last `batch_period` (on chunked topics, ros_mongo.storage.chunks: the last chunk's
 `CHUNK_SPAN` plus `batch_period`) plus the batches waiting for their turn to be written (bounded by
 `max_queue_bytes`). Everything counted as stored or spooled survives (the spool is drained
 by the next recorder using it). Per topic, the database plus the spool hold a gap-free prefix of the
@@ -36,15 +36,16 @@ from typing import Deque, Dict, List, Optional, Sequence, Tuple
 
 import genpy
 
-from ros_mongo.bounded_spool import BoundedSpool
-from ros_mongo.chunks import Chunker, ChunkPolicy, ChunkRecord, PendingChunk, message_count
-from ros_mongo.decoding import DecodePolicy
 from ros_mongo.errors import DocumentsRejected, SpoolError, StoreError
-from ros_mongo.quarantine import Quarantine
-from ros_mongo.record_builder import Key as _Key
-from ros_mongo.record_builder import RecordBuilder
+from ros_mongo.messages.decoding import DecodePolicy
+from ros_mongo.recording.bounded_spool import BoundedSpool
+from ros_mongo.recording.chunker import Chunker, ChunkPolicy, PendingChunk
+from ros_mongo.recording.quarantine import Quarantine
+from ros_mongo.recording.record_builder import Key as _Key
+from ros_mongo.recording.record_builder import RecordBuilder
 from ros_mongo.records import MessageRecord, TopicInfo
-from ros_mongo.store import MessageStore
+from ros_mongo.storage.chunks import ChunkRecord, message_count
+from ros_mongo.storage.store import MessageStore
 
 __all__ = ["Recorder", "ITEM_OVERHEAD"]
 
@@ -71,8 +72,8 @@ class Recorder:
         session_id, robot_id, tags, author: stored with every message; topic_tags adds tags per topic.
         quarantine_path: where refused documents go (default: the spool path + ".quarantine").
         decode: how much of each topic's messages is decoded into queryable fields
-            (ros_mongo.decoding; default: everything).
-        chunks: which topics are stored as chunks (ros_mongo.chunks; default: none), for stores
+            (ros_mongo.messages.decoding; default: everything).
+        chunks: which topics are stored as chunks (ros_mongo.storage.chunks; default: none), for stores
             that take them (CouchDB).
     """
 

@@ -12,11 +12,11 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from std_msgs.msg import Header
 
 from robot_common.ros_node import ros_home
-from ros_mongo.bounded_spool import BoundedSpool
-from ros_mongo.legacy import legacy_config
+from ros_mongo.compat.legacy import legacy_config
 from ros_mongo.params import ORIGINAL_TOPICS, RecorderParams, compile_patterns
-from ros_mongo.recorder import Recorder
-from ros_mongo.store import open_store
+from ros_mongo.recording.bounded_spool import BoundedSpool
+from ros_mongo.recording.recorder import Recorder
+from ros_mongo.storage.store import open_store
 
 __all__ = ["RecorderNode", "ORIGINAL_TOPICS", "start"]
 
@@ -26,9 +26,9 @@ class RecorderNode:
 
     Parameters: `RecorderParams` (each with its default and meaning; the launch file loads them
     from config/ros_mongo_server.yaml); the original mongodb_api's global parameters are honoured
-    with a deprecation warning (ros_mongo.legacy). The recorded topics are ~topics, plus published topics
-    matching ~include, minus those matching ~exclude; ~max_queue_mb bounds memory, the spool at
-    ~spool_path takes what does not fit or cannot be written.
+    with a deprecation warning (ros_mongo.compat.legacy). The recorded topics are ~topics, plus
+    published topics matching ~include, minus those matching ~exclude; ~max_queue_mb bounds memory,
+    the spool at ~spool_path takes what does not fit or cannot be written.
     Subscribes: the recorded topics (rospy.AnyMsg: exact bytes, any type).
     Publishes: /diagnostics (diagnostic_msgs/DiagnosticArray): ERROR with the server's reason while
         writes fail (the messages are kept: spooled), or after a writer restart until writes work;

@@ -10,7 +10,7 @@ draining an entry twice (killed between insert and offset update) still stores i
 Bounds: `max_bytes` (the file's size, default 4 GiB) and `min_free_bytes` (free space left on the
 file system, default 1 GiB, like `rosbag record --min-space`): an append that would cross either
 raises SpoolFull and writes nothing. The same framed format holds the recorder's quarantine file
-(ros_mongo.quarantine).
+(ros_mongo.recording.quarantine).
 """
 import fcntl
 import os
@@ -23,14 +23,13 @@ from typing import Dict, List, Tuple, Union
 
 import orjson
 
-from ros_mongo.chunks import ChunkRecord, message_count
 from ros_mongo.errors import SpoolError
+from ros_mongo.recording.limits import DEFAULT_MAX_BYTES, DEFAULT_MIN_FREE_BYTES
 from ros_mongo.records import MessageRecord, TopicInfo
+from ros_mongo.storage.chunks import ChunkRecord, message_count
 
 __all__ = ["Spool", "SpoolFull", "DEFAULT_MAX_BYTES", "DEFAULT_MIN_FREE_BYTES", "read_entries", "frames"]
 
-DEFAULT_MAX_BYTES = 4 << 30
-DEFAULT_MIN_FREE_BYTES = 1 << 30
 
 MAGIC = b"RMS1"
 _FRAME = struct.Struct("<4sIII")

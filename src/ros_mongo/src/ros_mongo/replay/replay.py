@@ -26,7 +26,7 @@ import genpy
 
 from ros_mongo.errors import StoreError
 from ros_mongo.query import Query
-from ros_mongo.store import MessageStore, open_store
+from ros_mongo.storage.store import MessageStore, open_store
 
 __all__ = ["Replayer", "ReplayItem", "load"]
 
@@ -252,13 +252,13 @@ def _log_lateness(late: List[float], prerolled: float) -> None:
 
 
 class _LoaderProcess:
-    """`python -m ros_mongo.loader` reading `window`; a receiver thread moves its chunks of message
+    """`python -m ros_mongo.replay.loader` reading `window`; a receiver thread moves its chunks of message
     tuples into the player's buffer."""
 
     def __init__(self, store: MessageStore, window: Query, buffer: "_Buffer"):
         url, options = store.reopen_args()
-        self.process = subprocess.Popen([sys.executable, "-m", "ros_mongo.loader"], stdin=subprocess.PIPE,
-                                        stdout=subprocess.PIPE)
+        self.process = subprocess.Popen([sys.executable, "-m", "ros_mongo.replay.loader"],
+                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE)
         pickle.dump((url, options, window), self.process.stdin)  # credentials go through the pipe only
         self.process.stdin.close()
         self.buffer = buffer

@@ -15,14 +15,14 @@ import rospy
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger, TriggerResponse
 
+from ros_mongo.compat.legacy import legacy_config, original_document
 from ros_mongo.errors import QueryError, StoreError
-from ros_mongo.legacy import legacy_config, original_document
 from ros_mongo.params import RetrieverParams, configured_query
 from ros_mongo.query import Query, parse_query
 from ros_mongo.records import TopicInfo
-from ros_mongo.replay import Replayer, ReplayItem
+from ros_mongo.replay.replay import Replayer, ReplayItem
 from ros_mongo.srv import Count, CountResponse, SensorData, SensorDataResponse, Start, StartResponse
-from ros_mongo.store import open_store
+from ros_mongo.storage.store import open_store
 
 __all__ = ["RetrieverNode", "raw_class", "start"]
 
@@ -39,7 +39,7 @@ class RetrieverNode:
     Services: ~count (ros_mongo/Count), ~start (ros_mongo/Start), ~stop (std_srvs/Trigger),
         ~sensor_data (ros_mongo/SensorData: matching messages in the original mongodb_api's form).
     The original mongodb_api's global parameters are honoured with a deprecation warning
-    (ros_mongo.legacy).
+    (ros_mongo.compat.legacy).
     """
 
     def __init__(self, config: RetrieverParams):

@@ -5,8 +5,8 @@ A backend subclasses `MessageStore`, implements its primitives (`_setup`, `_batc
 `_write_batch`, `_put_topic_doc`, `_topic_docs`, `_docs`, `_count`, `_load_blob`, `ping`,
 `close`, and `ensure_indexes` where it has indexes) and registers itself for its URL schemes with
 `register_backend`. Everything users call lives here; the stored document layout is in
-`ros_mongo.documents`. This module imports no backend: `ros_mongo.backends` imports each one, and
-each registers itself on import.
+`ros_mongo.storage.documents`. This module imports no backend: `ros_mongo.storage.backends`
+imports each one, and each registers itself on import.
 
 Write errors (taxonomy in ros_mongo.errors): `_write_batch` raises StoreUnavailable (retry later),
 StoreRefused (operator must act) or BatchTooLarge (refused as a whole because of one document:
@@ -20,8 +20,7 @@ import time
 from io import BytesIO
 from typing import Callable, Dict, Iterator, List, Optional, Sequence, Tuple, Type, TypeVar, Union
 
-import ros_mongo.msgtypes as msgtypes
-from ros_mongo.documents import stored_message, topic_from_doc
+import ros_mongo.messages.msgtypes as msgtypes
 from ros_mongo.errors import (
     BatchTooLarge,
     DocumentsRejected,
@@ -33,6 +32,7 @@ from ros_mongo.errors import (
 )
 from ros_mongo.query import Query
 from ros_mongo.records import MessageRecord, StoredMessage, TopicInfo, make_record, split_time
+from ros_mongo.storage.documents import stored_message, topic_from_doc
 from ros_mongo.urls import check_url, redact_url
 
 __all__ = ["MessageStore", "PreparedRecords", "BLOB_THRESHOLD", "redact_url", "register_backend",
@@ -43,7 +43,7 @@ BLOB_THRESHOLD = 256 * 1024
 
 
 class MessageStore(abc.ABC):
-    """Stores ROS messages with their metadata (document layout: ros_mongo.documents).
+    """Stores ROS messages with their metadata (document layout: ros_mongo.storage.documents).
 
     Args:
         url: the database URL (credentials are never logged).

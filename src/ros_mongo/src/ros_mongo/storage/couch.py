@@ -46,8 +46,11 @@ import orjson
 import pybase64
 import requests
 
-from ros_mongo.backends.base import MessageStore, register_backend
-from ros_mongo.chunks import (
+from ros_mongo.errors import BatchTooLarge, QueryError, StoreError, StoreRefused, StoreUnavailable
+from ros_mongo.query import Query
+from ros_mongo.records import MessageRecord, TopicInfo
+from ros_mongo.storage.base import MessageStore, register_backend
+from ros_mongo.storage.chunks import (
     CHUNK_KEYS,
     CHUNK_SPAN,
     ChunkRecord,
@@ -55,12 +58,9 @@ from ros_mongo.chunks import (
     expand,
     sorted_messages,
 )
-from ros_mongo.couch_client import CouchClient
-from ros_mongo.documents import META_KEYS, message_doc, query_conditions, to_selector, topic_doc
-from ros_mongo.errors import BatchTooLarge, QueryError, StoreError, StoreRefused, StoreUnavailable
-from ros_mongo.mango import compile_selector
-from ros_mongo.query import Query
-from ros_mongo.records import MessageRecord, TopicInfo
+from ros_mongo.storage.couch_client import CouchClient
+from ros_mongo.storage.documents import META_KEYS, message_doc, query_conditions, to_selector, topic_doc
+from ros_mongo.storage.mango import compile_selector
 
 __all__ = ["CouchStore", "MAX_DOC_BYTES", "message_rev"]
 
@@ -84,7 +84,7 @@ class CouchStore(MessageStore):
 
     backend = "couchdb"
     backend_title = "CouchDB"
-    chunks = True   # stores ros_mongo.chunks.ChunkRecord (chunked topics)
+    chunks = True   # stores ros_mongo.storage.chunks.ChunkRecord (chunked topics)
 
     def __init__(self, url: str, *, timeout: float = 30.0, page_size: int = 200,
                  tls_ca_file: Optional[str] = None, tls_cert_file: Optional[str] = None,
@@ -102,7 +102,7 @@ class CouchStore(MessageStore):
         self.page_size = int(page_size)
         self.indexed: Optional[bool] = None  # whether the Mango indexes exist (None: not known yet)
 
-    # -- HTTP (ros_mongo.couch_client: one client, one error mapping) ---------------------------
+    # -- HTTP (ros_mongo.storage.couch_client: one client, one error mapping) ---------------------------
     def _request(self, method: str, path: str, *, ok=(200, 201, 202), **kwargs) -> requests.Response:
         """One request; any answer outside `ok` raises per the taxonomy in the module docstring."""
         return self.client.request(method, path, ok=ok, **kwargs)
@@ -296,7 +296,7 @@ class CouchStore(MessageStore):
     def _merged(self, query: Query, newest_first: bool, limit: Optional[int], fields: Optional[List[str]],
                 with_bytes: bool, decoded: bool) -> Iterator[Tuple[dict, Optional[bytes]]]:
         """One sorted stream per topic (each uses the topic+time index), chunks expanded into their
-        messages (ros_mongo.chunks), merged by time: (message document, its bytes when inline or
+        messages (ros_mongo.storage.chunks), merged by time: (message document, its bytes when inline or
         `with_bytes` for a chunk's; a chunk's decoded fields when `decoded`)."""
         if limit == 0:
             return iter(())

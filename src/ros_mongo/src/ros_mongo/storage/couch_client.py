@@ -9,7 +9,7 @@ bundle), `tls_cert_file` + `tls_key_file` (a client certificate), `tls_verify=Fa
 testing.
 
 Answers outside `ok` raise one error mapping, in the caller's error family (`ErrorFamily`; the
-store's by default, the replication's for ros_mongo.replication):
+store's by default, the replication's for ros_mongo.fleet.replication):
 - connection errors, timeouts, a truncated body, 429, 5xx but 501 -> `unavailable` (retry later);
 - 401, 403, 500 `error_saving_ddoc` forbidden, 501, a TLS failure -> `refused` (operator must act);
 - 413 -> BatchTooLarge (`document_too_large` names the document);

@@ -16,11 +16,11 @@ from bson.binary import Binary
 from pymongo import errors as mongo_errors
 from pymongo.write_concern import WriteConcern
 
-from ros_mongo.backends.base import MessageStore, register_backend
-from ros_mongo.documents import message_doc, query_conditions, to_selector, topic_doc
 from ros_mongo.errors import BatchTooLarge, QueryError, StoreError, StoreRefused, StoreUnavailable
 from ros_mongo.query import Query
 from ros_mongo.records import MessageRecord, TopicInfo
+from ros_mongo.storage.base import MessageStore, register_backend
+from ros_mongo.storage.documents import message_doc, query_conditions, to_selector, topic_doc
 from ros_mongo.urls import scrub
 
 __all__ = ["MongoStore", "MAX_BSON_BYTES", "INDEXES"]

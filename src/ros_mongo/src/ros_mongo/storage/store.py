@@ -3,8 +3,8 @@
     store = open_store("http://127.0.0.1:5984/robot_data")      # CouchDB (the default backend)
     store = open_store("mongodb://127.0.0.1:27017/robot_data")  # MongoDB (pymongo 4, GridFS)
 
-The store API is `ros_mongo.backends.base.MessageStore`; the backends register themselves for
-their URL schemes when `ros_mongo.backends` is imported (as here).
+The store API is `ros_mongo.storage.base.MessageStore`; the backends register themselves for
+their URL schemes when `ros_mongo.storage.backends` is imported (as here).
 
 Credentials: keep the URL password-free and give the password through `credentials_file` or the
 environment (ROS_MONGO_DB_PASSWORD, ROS_MONGO_DB_USER; see `ros_mongo.urls`). Errors and logs only
@@ -13,7 +13,7 @@ ever show the redacted URL.
 import logging
 from typing import Optional
 
-from ros_mongo.backends import BLOB_THRESHOLD, MessageStore, backend_for_url, redact_url
+from ros_mongo.storage.backends import BLOB_THRESHOLD, MessageStore, backend_for_url, redact_url
 from ros_mongo.urls import check_url, with_credentials
 
 __all__ = ["MessageStore", "open_store", "redact_url", "BLOB_THRESHOLD"]

@@ -1,0 +1,1 @@
+"""Compatibility with the original mongodb_api: its parameters, topics, tags and documents."""
