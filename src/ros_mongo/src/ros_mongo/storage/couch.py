@@ -59,6 +59,7 @@ from ros_mongo.storage.chunks import (
     sorted_messages,
 )
 from ros_mongo.storage.couch_client import CouchClient
+from ros_mongo.storage.couch_pages import Pager, id_bound, take
 from ros_mongo.storage.documents import META_KEYS, message_doc, query_conditions, to_selector, topic_doc
 from ros_mongo.storage.mango import compile_selector
 
@@ -69,7 +70,6 @@ log = logging.getLogger(__name__)
 MAX_DOC_BYTES = 8_000_000
 _INDEXES = {"ros_mongo_topic_time": ["topic", "receive_time"], "ros_mongo_time": ["receive_time"]}
 _DB_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789_$()+-/")
-_MIN_WINDOW = 1e-3   # seconds: the windowed reader's smallest time window
 _READ_RETRIES = 4    # a read answered "retry later" is tried this many times (backoff 0.5, 1, 2 s)
 # Bytes per second a busy server is given to store a `_bulk_docs` body before its answer is
 # overdue: a 3-node cluster on a loaded machine took 14 s for 9 MB; with the bare `timeout`,
@@ -312,7 +312,7 @@ class CouchStore(MessageStore):
                                   query, newest_first, with_bytes, decoded) for topic in topics]
         merged = streams[0] if len(streams) == 1 else heapq.merge(
             *streams, key=lambda m: (m[0]["receive_time"], m[0]["_id"]), reverse=newest_first)
-        return merged if limit is None else _take(merged, limit)
+        return merged if limit is None else take(merged, limit)
 
     def _messages(self, docs: Iterator[dict], query: Query, newest_first: bool, with_bytes: bool,
                   decoded: bool) -> Iterator[Tuple[dict, Optional[bytes]]]:
@@ -342,7 +342,7 @@ class CouchStore(MessageStore):
             return self._by_id(query, base, newest_first, limit, fields)
         direction = "desc" if newest_first else "asc"
         sort = [{"topic": direction}, {"receive_time": direction}] if topic else [{"receive_time": direction}]
-        page = _Pager(self._find, base, sort, fields, self.page_size, newest_first)
+        page = Pager(self._find, base, sort, fields, self.page_size, newest_first)
         if set(base) <= {"topic"}:  # the index answers the whole selector: page by cursor
             return page.range(query.start_time, query.end_time, limit)
         # Other conditions are filtered after the index lookup (by pouchdb-server over the whole
@@ -389,8 +389,8 @@ class CouchStore(MessageStore):
         selector["receive_time"] = {"$gte": -1e300 if query.start_time is None else query.start_time}
         if query.end_time is not None:
             selector["receive_time"]["$lte"] = query.end_time
-        low = _id_bound(query.start_time, -1, "") if query.start_time is not None else "0"
-        high = _id_bound(query.end_time, 1, "\ufff0") if query.end_time is not None else "9\ufff0"
+        low = id_bound(query.start_time, -1, "") if query.start_time is not None else "0"
+        high = id_bound(query.end_time, 1, "\ufff0") if query.end_time is not None else "9\ufff0"
         if fields:
             fields = sorted(set(fields) | {"_id", "receive_time"})
         page = max(self.page_size, 500)
@@ -457,84 +457,6 @@ def field_matcher(query: Query):
     return compile_selector(to_selector(conditions))
 
 
-class _Pager:
-    """Reads one sorted `_find` stream in pages (CouchDB has no server cursor for Mango)."""
-
-    def __init__(self, find, base: dict, sort: list, fields: Optional[List[str]], page_size: int,
-                 newest_first: bool):
-        self.find, self.base, self.sort, self.fields = find, base, sort, fields
-        self.page_size, self.newest_first = page_size, newest_first
-
-    def range(self, low: Optional[float], high: Optional[float], limit: Optional[int], *,
-              open_end: bool = False) -> Iterator[dict]:
-        """Documents with low <= receive_time <= high (the far end excluded when `open_end`)."""
-        cursor, same, yielded = None, 0, 0
-        while True:
-            want = self.page_size if limit is None else min(self.page_size, limit - yielded)
-            if want <= 0:
-                return
-            body = {"selector": dict(self.base, receive_time=self._condition(low, high, cursor, open_end)),
-                    "sort": self.sort, "limit": want, "skip": same}
-            if self.fields:
-                body["fields"] = self.fields
-            docs = self.find(body)
-            for doc in docs:
-                if doc["receive_time"] == cursor:
-                    same += 1
-                else:
-                    cursor, same = doc["receive_time"], 1
-                yield doc
-            yielded += len(docs)
-            if len(docs) < want:
-                return
-
-    def _condition(self, low, high, cursor, open_end) -> Dict[str, float]:
-        if cursor is not None:
-            if self.newest_first:
-                high = cursor
-            else:
-                low = cursor
-        condition = {"$gte": -1e300 if low is None else low}
-        if high is not None:
-            condition["$lte"] = high
-        if open_end and not self.newest_first and high is not None:
-            condition["$lt"] = condition.pop("$lte")
-        if open_end and self.newest_first and low is not None:
-            condition["$gt"] = condition.pop("$gte")
-        return condition
-
-    def windows(self, bounds: Optional[Tuple[float, float]], limit: Optional[int]) -> Iterator[dict]:
-        """Documents within `bounds`, read window by window; each window's span doubles while
-        windows answer fast or hold few documents, and halves (down to `_MIN_WINDOW`) when they are
-        slow and dense."""
-        if bounds is None:
-            return
-        low, high = bounds
-        span, yielded = 1.0, 0
-        edge = high if self.newest_first else low
-        while (edge >= low) if self.newest_first else (edge <= high):
-            if self.newest_first:
-                start, end, last = max(low, edge - span), edge, edge - span <= low
-            else:
-                start, end, last = edge, min(high, edge + span), edge + span >= high
-            began, count = time.monotonic(), 0
-            for doc in self.range(start, end, None if limit is None else limit - yielded,
-                                  open_end=not last):
-                yielded += 1
-                count += 1
-                yield doc
-            if last or (limit is not None and yielded >= limit):
-                return
-            edge = start if self.newest_first else end
-            took = time.monotonic() - began
-            # A window shrinks only when it was slow because it was dense (more than a page), never
-            # below a floor; a slow link with sparse windows grows them: reading always advances.
-            if took > 0.5 and count > self.page_size:
-                span = max(span / 2, _MIN_WINDOW)
-            elif took < 0.1 or count < self.page_size // 4:
-                span *= 2
-
-
 def message_rev(doc_id: str) -> str:
     """The revision a message document is written with: "1-" and 32 hex digits derived from its id
     (a message id names one message, so every writer of it gives the same revision)."""
@@ -558,13 +480,6 @@ def _bulk_results(response: requests.Response, url: str) -> List[dict]:
     return results
 
 
-def _take(items: Iterator[dict], limit: int) -> Iterator[dict]:
-    for count, item in enumerate(items):
-        if count >= limit:
-            return
-        yield item
-
-
 def _dumps(doc: dict) -> Optional[bytes]:
     """Compact JSON (orjson: a fifth of the json module's CPU for the decoded fields); None for a
     document that JSON cannot hold."""
@@ -572,10 +487,3 @@ def _dumps(doc: dict) -> Optional[bytes]:
         return orjson.dumps(doc)
     except TypeError:  # orjson.JSONEncodeError: an integer beyond 64 bits, a key that is no string
         return None
-
-
-def _id_bound(seconds: float, margin: int, suffix: str) -> str:
-    """The message id prefix for a receive time (ids begin with the time in nanoseconds), widened
-    by `margin` microseconds against rounding (the selector checks the exact time)."""
-    nanoseconds = max(0, int(round(seconds * 1e9)) + margin * 1000)
-    return f"{nanoseconds:019d}{suffix}"
