@@ -1,0 +1,269 @@
+"""Following a path through a building among people with a learned reward (no ROS).
+
+`HallwayController` is what reward_controller runs in path mode: each cycle it moves its local
+waypoint along the path (`PathFollower`), builds a `HallwayTask` from the scan and the tracked
+people, plans with the reward plus a fixed barrier around every scan point and person
+(`HallwayBarrier`: the demonstrations never show what touching costs) and returns the first
+command - or zero when the scan shows anything inside its safety margin, saying why
+(`status_`); a robot held up longer than `blocked_after` seconds reports the path blocked and
+stays stopped. Learning (`fit_hallway_reward`) is CIOC over the same tasks, built from the
+demonstrations' own scans and tracked people at the start of each 4 s window, then an
+acceptance check with the controller in the loop (`hallway_acceptance`): refused only where
+the controller fails where the person succeeded.
+"""
+import math
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from lfd_controller.cioc import LinearCIOC
+from lfd_controller.demos import Demonstration
+from lfd_controller.errors import LfdError
+from lfd_controller.hallway_features import (
+    HALLWAY_SIGNS,
+    HallwayFeatures,
+    HallwayTask,
+    PathFollower,
+    in_sight,
+    scan_points,
+)
+from lfd_controller.laplace import DemoDynamics
+from lfd_controller.planner import RecedingHorizonController
+from lfd_controller.rewards import RewardDerivatives
+from robot_common.tasks import ObstacleMotion, Scenario
+
+__all__ = ["HALLWAY_DRIVING", "HallwayBarrier", "HallwayController", "HallwayDemonstration",
+           "HallwayCIOC", "hallway_scenario", "fit_hallway_reward", "hallway_windows",
+           "task_from_view"]
+
+# How the controller drives a hallway reward: 12 steps of 0.4 s (4.8 s look-ahead, the people's
+# constant-velocity prediction is not worth more), warm start + one turning seed per cycle,
+# discount 0.97, a barrier 0.1 m beyond touching, a safety stop when the scan shows anything
+# within 0.05 m of the robot's edge ahead, the path reported blocked after 20 s held up, the
+# local waypoint 4 m ahead on the path or the furthest point up to there in the scan's sight
+# (further than a 4 s window or the look-ahead travels: a waypoint passed inside a window
+# turns its progress feature around).
+HALLWAY_DRIVING = {"horizon": 12, "plan_dt": 0.4, "terminal": 0.0, "spread_seeds": True,
+                   "discount": 0.97, "max_iter": 12, "seed_turns": (0.0, 1.0, -1.0)}
+HALLWAY_SAFETY = {"robot_radius": 0.18, "person_radius": 0.25, "barrier_margin": 0.1,
+                  "stop_margin": 0.05, "blocked_after": 20.0, "lookahead": 4.0}
+WINDOW, STRIDE = 40, 20
+
+
+def hallway_scenario(dt: float = 0.1, name: str = "hallway") -> Scenario:
+    """The Scenario a hallway demonstration carries: the robot's limits and time step (its goal
+    and obstacle are unused: each window has its own HallwayTask)."""
+    return Scenario(name, np.zeros(2), ObstacleMotion(0.0, 0.0, 0.1), dt=dt,
+                    bounds=(-1e4, -1e4, 1e4, 1e4))
+
+
+def task_from_view(waypoint, goal, pose, angles, ranges, people, velocities, now: float,
+                   laser_offset: float = 0.0) -> HallwayTask:
+    """The planning instant's HallwayTask from the robot's pose (x, y, yaw), its scan (angles in
+    the laser frame, `laser_offset` m ahead of the base) and the tracked people (map frame)."""
+    x, y, yaw = (float(v) for v in pose[:3])
+    laser = (x + laser_offset * math.cos(yaw), y + laser_offset * math.sin(yaw), yaw)
+    people = np.asarray(people, float).reshape(-1, 2)
+    points = scan_points(laser, angles, ranges, people=people)
+    return HallwayTask(waypoint, goal, points, people, np.asarray(velocities, float).reshape(-1, 2),
+                       now)
+
+
+class HallwayBarrier:
+    """A reward plus -scale ((r + margin - d) / margin)^2 for each scan point (r: the robot's
+    radius) and each predicted person (r: both radii) closer than r + margin (planning only)."""
+
+    def __init__(self, reward, *, robot_radius: float, person_radius: float, margin: float,
+                 scale: Optional[float] = None):
+        self.reward, self.margin = reward, float(margin)
+        self.robot_radius, self.person_radius = float(robot_radius), float(person_radius)
+        self.scale = float(scale if scale is not None else 10.0 * np.max(np.abs(reward.weights)))
+
+    def derivatives(self, states, actions, times, task: HallwayTask, *, order: int = 1):
+        if order > 1:
+            raise LfdError("HallwayBarrier gives first derivatives only (for planning)")
+        rd = self.reward.derivatives(states, actions, times, task, order=order)
+        states = np.atleast_2d(np.asarray(states, float))
+        value, rx = rd.value.copy(), rd.rx.copy()
+        groups = [(np.broadcast_to(task.points[None], (len(states),) + task.points.shape),
+                   self.robot_radius)]
+        if len(task.people):
+            groups.append((task.people_at(times), self.robot_radius + self.person_radius))
+        for centres, reach in groups:
+            if centres.shape[1] == 0:
+                continue
+            offset = states[:, None, :2] - centres
+            distance = np.maximum(np.linalg.norm(offset, axis=2), 1e-9)
+            depth = np.maximum(reach + self.margin - distance, 0.0) / self.margin
+            value -= self.scale * (depth ** 2).sum(axis=1)
+            pull = (2.0 * self.scale * depth / self.margin / distance)[..., None] * offset
+            rx[:, :2] += pull.sum(axis=1)
+        return RewardDerivatives(value, rx, rd.ru)
+
+
+@dataclass
+class HallwayController:
+    """Path following with a learned hallway reward (module docstring). `act(state, t, angles,
+    ranges, people, velocities)` -> command; `status_` is "following", "arrived", "stopped: ..."
+    or "blocked: ..."; `cycle_times_` the planning times."""
+
+    reward: object
+    path: np.ndarray
+    model: object
+    budget: Optional[float] = 0.1
+    goal_tolerance: float = 0.3
+    laser_offset: float = 0.0
+    settings: Dict = field(default_factory=lambda: dict(HALLWAY_DRIVING))
+    safety: Dict = field(default_factory=lambda: dict(HALLWAY_SAFETY))
+
+    def __post_init__(self):
+        self.follower = PathFollower(self.path, lookahead=self.safety["lookahead"])
+        planned = HallwayBarrier(self.reward, robot_radius=self.safety["robot_radius"],
+                                 person_radius=self.safety["person_radius"],
+                                 margin=self.safety["barrier_margin"])
+        self.planner = RecedingHorizonController(planned, self.model, budget=self.budget,
+                                                 **self.settings)
+        self.status_, self.held_since_ = "following", None
+
+    @property
+    def goal(self) -> np.ndarray:
+        return self.follower.path[-1]
+
+    @property
+    def cycle_times_(self) -> List[float]:
+        return self.planner.cycle_times_
+
+    def task(self, state, t: float, angles, ranges, people, velocities) -> HallwayTask:
+        laser = (state[0] + self.laser_offset * math.cos(state[2]),
+                 state[1] + self.laser_offset * math.sin(state[2]), state[2])
+        waypoint = self.follower.update(state[:2], in_sight(laser, angles, ranges))
+        return task_from_view(waypoint, self.goal, state, angles, ranges, people, velocities, t,
+                              self.laser_offset)
+
+    def act(self, state, t: float, angles, ranges, people, velocities) -> np.ndarray:
+        state = np.asarray(state, float)
+        if np.hypot(*(self.goal - state[:2])) < self.goal_tolerance:
+            self.status_ = "arrived"
+            return np.zeros(2)
+        if self.status_.startswith("blocked"):
+            return np.zeros(2)
+        task = self.task(state, t, angles, ranges, people, velocities)
+        command = self.planner.act(state, t, task)
+        reason = self._too_close(angles, ranges, command)
+        moving = abs(state[3]) > 0.05 or abs(command[0]) > 0.05
+        if reason is None and moving:
+            self.held_since_, self.status_ = None, "following"
+            return command
+        self.held_since_ = t if self.held_since_ is None else self.held_since_
+        if t - self.held_since_ >= self.safety["blocked_after"]:
+            self.status_ = (f"blocked: held up {t - self.held_since_:.0f} s at "
+                            f"{self.follower.progress:.1f} of {self.follower.length:.1f} m")
+            return np.zeros(2)
+        if reason is not None:
+            self.status_ = f"stopped: {reason}"
+            return np.zeros(2)
+        self.status_ = "waiting"
+        return command
+
+    def _too_close(self, angles, ranges, command) -> Optional[str]:
+        """Why the scan forbids moving (something inside the safety margin on the side the
+        command drives to), or None."""
+        ranges, angles = np.asarray(ranges, float), np.asarray(angles, float)
+        limit = self.safety["robot_radius"] + self.safety["stop_margin"] + self.laser_offset
+        direction = 0.0 if command[0] >= 0 else math.pi
+        facing = np.cos(angles - direction) > 0.0
+        close = facing & np.isfinite(ranges) & (ranges < limit)
+        if not close.any():
+            return None
+        nearest = int(np.argmin(np.where(close, ranges, np.inf)))
+        return (f"scan {ranges[nearest]:.2f} m at {math.degrees(angles[nearest]):.0f} deg inside "
+                f"the {limit:.2f} m safety margin")
+
+
+@dataclass
+class HallwayDemonstration(Demonstration):
+    """A window of a hallway drive with the HallwayTask seen where it starts."""
+
+    task: Optional[HallwayTask] = None
+
+
+def hallway_windows(states, actions, tasks: Sequence[HallwayTask], *, dt: float = 0.1,
+                    length: int = WINDOW, stride: int = STRIDE, source: str = "person"
+                    ) -> List[HallwayDemonstration]:
+    """A drive (states x_0..x_T, actions (T, 2), the task seen at each step) cut into windows of
+    `length` steps every `stride`, each with the task seen where it starts (as the controller
+    plans: from what it sees now)."""
+    states, actions = np.asarray(states, float), np.asarray(actions, float)
+    scenario = hallway_scenario(dt)
+    pieces = []
+    for first in range(0, max(1, len(actions) - length // 2), stride):
+        last = min(len(actions), first + length)
+        if last - first < max(2, length // 2):
+            break
+        pieces.append(HallwayDemonstration(scenario, states[first], actions[first:last],
+                                           first * dt, states[first + 1:last + 1], source,
+                                           {"window": [first, last]}, task=tasks[first]))
+    return pieces
+
+
+class HallwayCIOC(LinearCIOC):
+    """LinearCIOC over HallwayFeatures, each window with its own task."""
+
+    def __init__(self, **kwargs):
+        kwargs.setdefault("signs", HALLWAY_SIGNS)
+        kwargs.setdefault("action_noise", "learn")
+        kwargs.setdefault("second_order", False)
+        super().__init__(HallwayFeatures(), **kwargs)
+
+    def _terms(self, demos):
+        from lfd_controller.cioc import feature_terms
+        return [feature_terms(DemoDynamics(d.scenario.model(), d.start, d.actions, d.t0, d.task),
+                              self.features, self.terminal, self.second_order) for d in demos]
+
+
+def fit_hallway_reward(windows: Sequence[HallwayDemonstration], seed: int = 0):
+    """(reward, learner): HallwayCIOC on the windows (one BLAS thread: small matrices)."""
+    if not windows:
+        raise LfdError("no hallway demonstration windows to learn from")
+    learner = HallwayCIOC(random_state=seed)
+    with threadpool_limits(1):
+        learner.fit(list(windows))
+    return learner.reward_, learner
+
+
+def calibrate_pace(reward, person_speed: float):
+    """The reward with its squared-speed penalties scaled so its preferred cruising speed
+    (path_progress / (2 |speed penalties|)) is the person's median moving speed: the one scale
+    the acceptance check sets (the pace is weakly identified by windows; README)."""
+    named = dict(zip(reward.features.names, reward.weights))
+    squared = named["speed_squared"] + named["speed_effort"]
+    if not (named["path_progress"] > 0 and squared < 0 and person_speed > 0):
+        return reward
+    wanted = -named["path_progress"] / (2.0 * person_speed)
+    weights = reward.weights.copy()
+    for name in ("speed_squared", "speed_effort"):
+        weights[reward.features.names.index(name)] *= wanted / squared
+    return type(reward)(weights, reward.features)
+
+
+def hallway_acceptance(person: Sequence[Dict], controller: Sequence[Dict]) -> Dict:
+    """The verdict on the controller's drives against the person's on the same scenes (dicts
+    with success, collision, time): refused only for failing where the person succeeded - fewer
+    than 80 % of the person's successes, any collision, or a median time over 1.5 x the
+    person's."""
+    mine = [c for p, c in zip(person, controller) if p["success"]]
+    failures = []
+    if not mine:
+        return {"accepted": True, "failures": [], "note": "the person never succeeded"}
+    rate = sum(c["success"] for c in mine) / len(mine)
+    if rate < 0.8:
+        failures.append(f"reaches the goal in {rate:.0%} of the scenes the person did")
+    if any(c.get("collision") for c in controller):
+        failures.append("collides")
+    times = [(c["time"], p["time"]) for p, c in zip(person, controller) if p["success"] and
+             c["success"]]
+    if times and np.median([a for a, _ in times]) > 1.5 * np.median([b for _, b in times]):
+        failures.append("median time over 1.5 x the person's")
+    return {"accepted": not failures, "failures": failures}

@@ -1,0 +1,248 @@
+"""Reward features for following a path through a building among people (no ROS).
+
+What a real robot has: a path (move_base's global plan or the workspace's grid planner), its
+laser scan and a people tracker. A `HallwayTask` is one planning instant's view of them: the
+local waypoint on the path (`PathFollower`), the scan's nearest points (the minimum of each
+sector: walls and things the map does not have) and the tracked people moving at their tracked
+velocities. Features (`HallwayFeatures`), summed over any number of points and people so one
+reward fits every count:
+
+  * `waypoint_heading`, `path_progress` - facing the local waypoint, and v x that (progress along
+    the path per step);
+  * `wall_proximity`, `wall_proximity_0.5` - sum over scan points of exp(-d^2 / 2 w^2), w = 0.25 m
+    and 0.5 m (clearance to walls and unknown obstacles);
+  * `people_proximity`, `people_room` - the same over the people, w = 0.5 m and 1.0 m (a person's
+    proximity, the room kept);
+  * `people_predicted` - each person's proximity 1 s ahead (robot at its speed and heading, person
+    at their velocity): a smooth predicted closest approach;
+  * `speed_squared`, `turn_squared` and the command efforts `speed_effort`, `turn_effort`.
+
+Derivatives come from the same forward-mode jets as the one-obstacle features (jets.py).
+"""
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Dict, Optional
+
+import numpy as np
+
+from lfd_controller.errors import LfdError
+from lfd_controller.features import FeatureValues
+from lfd_controller.jets import Jet
+
+__all__ = ["HALLWAY_STATE_FEATURES", "HALLWAY_SIGNS", "HallwayTask", "HallwayFeatures",
+           "PathFollower", "in_sight", "scan_points"]
+
+HALLWAY_STATE_FEATURES = ("waypoint_heading", "path_progress", "wall_proximity",
+                          "wall_proximity_0.5", "people_proximity", "people_room",
+                          "people_predicted", "speed_squared", "turn_squared")
+CONTROL_FEATURES = ("speed_effort", "turn_effort")
+# What the features mean: progress and facing the waypoint are never worse; nearness to walls
+# and people and effort never better.
+HALLWAY_SIGNS = {"waypoint_heading": 1, "path_progress": 1, "wall_proximity": -1,
+                 "wall_proximity_0.5": -1, "people_proximity": -1, "people_room": -1,
+                 "people_predicted": -1, "speed_squared": -1, "turn_squared": -1,
+                 "speed_effort": -1, "turn_effort": -1}
+
+
+@dataclass
+class HallwayTask:
+    """One planning instant: waypoint (2,), the final goal (2,), scan points (M, 2) fixed in the
+    map, people (P, 2) seen at time `now` moving at `velocities` (P, 2)."""
+
+    waypoint: np.ndarray
+    goal: np.ndarray
+    points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    people: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    now: float = 0.0
+
+    def __post_init__(self):
+        self.waypoint = np.asarray(self.waypoint, float).reshape(2)
+        self.goal = np.asarray(self.goal, float).reshape(2)
+        self.points = np.asarray(self.points, float).reshape(-1, 2)
+        self.people = np.asarray(self.people, float).reshape(-1, 2)
+        self.velocities = np.asarray(self.velocities, float).reshape(-1, 2)
+        if self.people.shape != self.velocities.shape:
+            raise LfdError(f"{len(self.people)} people but {len(self.velocities)} velocities")
+
+    def people_at(self, times) -> np.ndarray:
+        """Predicted positions (T, P, 2) at times (T,)."""
+        lead = np.asarray(times, float).reshape(-1, 1, 1) - self.now
+        return self.people[None] + lead * self.velocities[None]
+
+
+def in_sight(pose, angles, ranges, *, margin: float = 0.3) -> Callable[[np.ndarray], bool]:
+    """point -> True when the scan's nearest beam toward it reaches `margin` m past it."""
+    x, y, yaw = (float(v) for v in pose[:3])
+    angles, ranges = np.asarray(angles, float), np.asarray(ranges, float)
+
+    def visible(point) -> bool:
+        if not len(angles):
+            return True
+        bearing = math.atan2(point[1] - y, point[0] - x) - yaw
+        beam = int(np.argmin(np.abs(np.angle(np.exp(1j * (angles - bearing))))))
+        return bool(ranges[beam] >= math.hypot(point[0] - x, point[1] - y) + margin
+                    or not np.isfinite(ranges[beam]))
+    return visible
+
+
+def scan_points(pose, angles, ranges, *, sectors: int = 16, reach: float = 3.0,
+                people: Optional[np.ndarray] = None, person_radius: float = 0.35) -> np.ndarray:
+    """The nearest scan point of each of `sectors` equal sectors (within `reach` m), in the frame
+    of `pose` (x, y, yaw of the laser); points within `person_radius` of a tracked person are
+    left to the people features."""
+    angles, ranges = np.asarray(angles, float), np.asarray(ranges, float)
+    ok = np.isfinite(ranges) & (ranges < reach) & (ranges > 0.01)
+    if not ok.any():
+        return np.zeros((0, 2))
+    x, y, yaw = (float(v) for v in pose[:3])
+    world = yaw + angles[ok]
+    xy = np.column_stack([x + ranges[ok] * np.cos(world), y + ranges[ok] * np.sin(world)])
+    if people is not None and len(people):
+        near = np.hypot(xy[:, None, 0] - people[None, :, 0],
+                        xy[:, None, 1] - people[None, :, 1]).min(axis=1) < person_radius
+        xy, world, kept = xy[~near], world[~near], ranges[ok][~near]
+    else:
+        kept = ranges[ok]
+    sector = np.floor(np.mod(world - yaw + math.pi, 2 * math.pi) / (2 * math.pi) * sectors)
+    points = []
+    for s in np.unique(sector):
+        members = np.flatnonzero(sector == s)
+        points.append(xy[members[np.argmin(kept[members])]])
+    return np.array(points).reshape(-1, 2)
+
+
+class PathFollower:
+    """Progress along a path (N, 2) and the local waypoint `lookahead` m ahead of it.
+
+    The progress never goes back by more than `lookahead` (a path that loops past itself is
+    followed in order) and is searched only `window` m ahead of the last one."""
+
+    def __init__(self, path, *, lookahead: float = 1.5, window: float = 4.0):
+        self.path = np.asarray(path, float).reshape(-1, 2)
+        if len(self.path) < 1:
+            raise LfdError("a path needs at least one point")
+        if not lookahead > 0:
+            raise LfdError(f"the waypoint look-ahead must be positive, got {lookahead!r}")
+        steps = np.hypot(*np.diff(self.path, axis=0).T) if len(self.path) > 1 else np.zeros(0)
+        self.arc = np.concatenate([[0.0], np.cumsum(steps)])
+        self.lookahead, self.window = float(lookahead), float(window)
+        self.progress = 0.0
+
+    @property
+    def length(self) -> float:
+        return float(self.arc[-1])
+
+    def point_at(self, s: float) -> np.ndarray:
+        s = float(np.clip(s, 0.0, self.length))
+        return np.array([np.interp(s, self.arc, self.path[:, i]) for i in (0, 1)])
+
+    def update(self, position, visible: Optional[Callable[[np.ndarray], bool]] = None
+               ) -> np.ndarray:
+        """Move the progress to the path point nearest `position` (within the search window) and
+        return the local waypoint: `lookahead` m further on, or with `visible` (point -> bool,
+        e.g. from the scan) the furthest point up to there that is in sight (at least 0.5 m on:
+        round a corner the waypoint waits at the corner)."""
+        position = np.asarray(position, float)[:2]
+        near = np.flatnonzero((self.arc >= self.progress - self.lookahead)
+                              & (self.arc <= self.progress + self.window))
+        if len(near):
+            best = near[np.argmin(np.hypot(*(self.path[near] - position).T))]
+            self.progress = max(self.progress - self.lookahead, float(self.arc[best]))
+        ahead = self.lookahead
+        while visible is not None and ahead > 0.5 and not visible(self.point_at(self.progress + ahead)):
+            ahead -= 0.25
+        return self.point_at(self.progress + ahead)
+
+    def distance_to_path(self, position) -> float:
+        return float(np.hypot(*(self.point_at(self.progress) - np.asarray(position, float)[:2])))
+
+
+class HallwayFeatures:
+    """The hallway features (module docstring) with the one-obstacle FeatureSet's interface:
+    `evaluate(states, actions, times, task, order)` -> FeatureValues and
+    `weighted_first_order(...)` for planning."""
+
+    kind = "hallway"
+
+    def __init__(self, *, heading_softening: float = 0.3, predicted: float = 1.0):
+        if not heading_softening > 0 or not predicted > 0:
+            raise LfdError(f"heading_softening and predicted must be positive, got "
+                           f"{heading_softening!r}, {predicted!r}")
+        self.heading_softening, self.predicted = float(heading_softening), float(predicted)
+        self.state_names = HALLWAY_STATE_FEATURES
+        self.control_names = CONTROL_FEATURES
+        self.names = self.state_names + self.control_names
+
+    def get_params(self) -> Dict:
+        return {"kind": self.kind, "heading_softening": self.heading_softening,
+                "predicted": self.predicted}
+
+    def _state_jets(self, states, times, task: HallwayTask, hessian: bool):
+        count = len(states)
+        px, py, yaw, v, w = Jet.variables(states, hessian)
+        gx, gy = task.waypoint[0] - px, task.waypoint[1] - py
+        heading = (gx * yaw.cos() + gy * yaw.sin()) / (gx.square() + gy.square()
+                                                       + self.heading_softening ** 2).sqrt()
+        jets = [heading, v * heading]
+        jets += _gaussian_sums(states, task.points[None], (0.25, 0.5), hessian, count)
+        people_now = task.people_at(times)
+        jets += _gaussian_sums(states, people_now, (0.5, 1.0), hessian, count)
+        ahead = task.people_at(np.asarray(times, float) + self.predicted)
+        jets += _gaussian_sums(states, ahead, (0.5,), hessian, count, reach=self.predicted)
+        jets += [v.square(), w.square()]
+        return jets
+
+    def evaluate(self, states, actions, times, task: HallwayTask, *, order: int = 2
+                 ) -> FeatureValues:
+        states = np.atleast_2d(np.asarray(states, float))
+        actions = np.atleast_2d(np.asarray(actions, float))
+        times = np.atleast_1d(np.asarray(times, float))
+        if not (len(states) == len(actions) == len(times)):
+            raise LfdError(f"states, actions and times differ in length: {len(states)}, "
+                           f"{len(actions)}, {len(times)}")
+        jets = self._state_jets(states, times, task, hessian=order >= 2)
+        count = len(states)
+        control_jac = np.zeros((count, 2, 2))
+        control_jac[:, 0, 0], control_jac[:, 1, 1] = 2.0 * actions[:, 0], 2.0 * actions[:, 1]
+        control_hess = np.zeros((count, 2, 2, 2))
+        control_hess[:, 0, 0, 0] = control_hess[:, 1, 1, 1] = 2.0
+        return FeatureValues(np.stack([j.val for j in jets], axis=1),
+                             np.stack([j.grad for j in jets], axis=1),
+                             np.stack([j.hess for j in jets], axis=1) if order >= 2 else None,
+                             actions ** 2, control_jac, control_hess)
+
+    def weighted_first_order(self, states, actions, times, task, state_weights, control_weights):
+        """(w . phi (T,), its state gradient (T, 5), its action gradient (T, 2)) for planning."""
+        fv = self.evaluate(states, actions, times, task, order=1)
+        state_weights = np.asarray(state_weights, float)
+        control_weights = np.asarray(control_weights, float)
+        value = fv.state @ state_weights + fv.control @ control_weights
+        return (value, np.einsum("k,tka->ta", state_weights, fv.state_jac),
+                np.einsum("c,tca->ta", control_weights, fv.control_jac))
+
+
+def _gaussian_sums(states, centres, widths, hessian: bool, count: int, reach: float = 0.0):
+    """For each width, the Jet of sum_j exp(-|c_tj - p_t - reach v_t h_t|^2 / 2 width^2) over the
+    centres (T or 1, J, 2) (reach 0: the robot's position itself)."""
+    centres = np.broadcast_to(np.asarray(centres, float), (count,) + np.shape(centres)[1:])
+    per = centres.shape[1]
+    if per == 0:
+        zero = Jet.variables(states[:, :1], hessian)[0] * 0.0
+        grad = np.zeros((count, 5))
+        hess = np.zeros((count, 5, 5)) if hessian else None
+        return [Jet(zero.val, grad, hess) for _ in widths]
+    px, py, yaw, v, _ = Jet.variables(np.repeat(states, per, axis=0), hessian)
+    cx, cy = centres[:, :, 0].reshape(-1), centres[:, :, 1].reshape(-1)
+    if reach:
+        dx, dy = cx - px - v * yaw.cos() * reach, cy - py - v * yaw.sin() * reach
+    else:
+        dx, dy = cx - px, cy - py
+    square = dx.square() + dy.square()
+    sums = []
+    for width in widths:
+        each = (square * (-0.5 / width ** 2)).exp()
+        hess = None if each.hess is None else each.hess.reshape(count, per, 5, 5).sum(axis=1)
+        sums.append(Jet(each.val.reshape(count, per).sum(axis=1),
+                        each.grad.reshape(count, per, 5).sum(axis=1), hess))
+    return sums
