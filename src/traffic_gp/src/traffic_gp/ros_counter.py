@@ -21,16 +21,34 @@ from std_srvs.srv import Trigger, TriggerResponse
 
 from robot_common.cells import CellGrid
 from robot_common.maps import load_map, quaternion_to_yaw
-from robot_common.msg import People, PeopleCount
+from robot_common.msg import People, PeopleCount, PositionMeasurementArray
 from robot_common.ros_maps import msg_to_grid
 from robot_common.ros_node import read_config
 from traffic_gp.counting import Detection, PeopleCounter, Scan, Watch
 from traffic_gp.params import PeopleCounterParams
 
-__all__ = ["PEOPLE_TYPES", "PeopleCounterNode", "start"]
+__all__ = ["PEOPLE_TYPES", "read_people", "PeopleCounterNode", "start"]
 
-# People messages read as robot_common/People: the same fields in the same order, so the same bytes.
-PEOPLE_TYPES = ("robot_common/People", "people_msgs/People")
+# People messages read by their layout: robot_common's mirrors have the same fields in the same
+# order as people_msgs', so the same bytes. Each gives (header, [(track id, x, y)]).
+PEOPLE_TYPES = {
+    "robot_common/People": People, "people_msgs/People": People,
+    "robot_common/PositionMeasurementArray": PositionMeasurementArray,
+    "people_msgs/PositionMeasurementArray": PositionMeasurementArray,
+}
+
+
+def read_people(kind: str, data: bytes):
+    """(header, [(track id, x, y)]) of a serialised people message of type `kind` (one of
+    PEOPLE_TYPES; None for another type). A People message's ids are its people's names, a
+    PositionMeasurementArray's (leg_detector) its measurements' object_id."""
+    cls = PEOPLE_TYPES.get(kind)
+    if cls is None:
+        return None
+    msg = cls().deserialize(data)
+    if cls is People:
+        return msg.header, [(p.name, p.position.x, p.position.y) for p in msg.people]
+    return msg.header, [(p.object_id, p.pos.x, p.pos.y) for p in msg.people]
 
 
 def pose_2d(transform) -> Tuple[float, float, float]:
@@ -47,9 +65,10 @@ class PeopleCounterNode:
       host name), ~watch (10 s), ~max_range (8 m), ~person_radius (0.25 m), ~dwell_time (20 s),
       ~min_detections (3), ~max_gap (0.5 s), ~people_timeout (0.5 s), ~tf_timeout (0.5 s),
       ~map_frame ("map").
-    Subscribes: `scan` (sensor_msgs/LaserScan), `people` (robot_common/People, or
-      people_msgs/People: read by its layout, which is the same), `map` (nav_msgs/OccupancyGrid,
-      when map_yaml is empty); tf from ~map_frame to the scan's and the people's frames.
+    Subscribes: `scan` (sensor_msgs/LaserScan), `people` (robot_common/People or
+      PositionMeasurementArray, or people_msgs/People or PositionMeasurementArray: read by their
+      layout, which is the same), `map` (nav_msgs/OccupancyGrid, when map_yaml is empty); tf from
+      ~map_frame to the scan's and the people's frames.
     Publishes: `people_counts` (robot_common/PeopleCount: the cells seen in a watch, their seen
       part, the people counted in each; header.stamp the watch's start).
     Services: `~status` (std_srvs/Trigger: scans used and skipped, and why; watches published).
@@ -106,24 +125,25 @@ class PeopleCounterNode:
 
     def _on_people(self, raw) -> None:
         kind = raw._connection_header.get("type", "")
-        if kind not in PEOPLE_TYPES:
+        read = read_people(kind, raw._buff)
+        if read is None:
             self.tally["other people types"] += 1
             rospy.logerr_throttle(30, f"people_counter: `people` has type {kind}; expected one "
                                       f"of {', '.join(PEOPLE_TYPES)}")
             return
-        msg = People().deserialize(raw._buff)
+        header, found = read
         try:
             x, y, yaw = pose_2d(self.tf_buffer.lookup_transform(
-                self.config.map_frame, msg.header.frame_id, msg.header.stamp,
+                self.config.map_frame, header.frame_id, header.stamp,
                 rospy.Duration(self.config.tf_timeout)))
         except tf2_ros.TransformException as err:
             rospy.logwarn_throttle(10, f"people_counter: people not placed in the map: {err}")
             return
         cos, sin = math.cos(yaw), math.sin(yaw)
-        people = [Detection(p.name, x + cos * p.position.x - sin * p.position.y,
-                            y + sin * p.position.x + cos * p.position.y) for p in msg.people]
+        people = [Detection(name, x + cos * px - sin * py, y + sin * px + cos * py)
+                  for name, px, py in found]
         with self._people_lock:
-            self._people.append((msg.header.stamp.to_sec(), people))
+            self._people.append((header.stamp.to_sec(), people))
             self.tally["people messages"] += 1
 
     # ---- the worker ---------------------------------------------------------------------------
