@@ -39,14 +39,17 @@ __all__ = ["HALLWAY_DRIVING", "HallwayBarrier", "HallwayController", "HallwayDem
            "task_from_view"]
 
 # How the controller drives a hallway reward: 12 steps of 0.4 s (4.8 s look-ahead, the people's
-# constant-velocity prediction is not worth more), warm start + one turning seed per cycle,
-# discount 0.97, a barrier 0.1 m beyond touching, a safety stop when the scan shows anything
-# within 0.05 m of the robot's edge ahead, the path reported blocked after 20 s held up, the
+# constant-velocity prediction is not worth more), warm start + one turning or detour seed per
+# cycle (detours 0.9 m beside what blocks the way to the waypoint; after 2 s standing in front
+# of something static, a detour past it: planner.RecedingHorizonController's unstall),
+# discount 0.97, a barrier 0.1 m beyond touching, a safety stop (zero command) when the scan
+# shows anything within 0.05 m of the robot's edge, the path reported blocked after 20 s held up, the
 # local waypoint 4 m ahead on the path or the furthest point up to there in the scan's sight
 # (further than a 4 s window or the look-ahead travels: a waypoint passed inside a window
 # turns its progress feature around).
 HALLWAY_DRIVING = {"horizon": 12, "plan_dt": 0.4, "terminal": 0.0, "spread_seeds": True,
-                   "discount": 0.97, "max_iter": 12, "seed_turns": (0.0, 1.0, -1.0)}
+                   "discount": 0.97, "max_iter": 12, "seed_turns": (0.0, 1.0, -1.0),
+                   "detour": 0.9, "unstall": 2.0}
 HALLWAY_SAFETY = {"robot_radius": 0.18, "person_radius": 0.25, "barrier_margin": 0.1,
                   "stop_margin": 0.05, "blocked_after": 20.0, "lookahead": 4.0}
 WINDOW, STRIDE = 40, 20
@@ -68,7 +71,7 @@ def task_from_view(waypoint, goal, pose, angles, ranges, people, velocities, now
     people = np.asarray(people, float).reshape(-1, 2)
     points = scan_points(laser, angles, ranges, people=people)
     return HallwayTask(waypoint, goal, points, people, np.asarray(velocities, float).reshape(-1, 2),
-                       now)
+                       now, robot=np.array([x, y]))
 
 
 class HallwayBarrier:
@@ -168,17 +171,17 @@ class HallwayController:
         return command
 
     def _too_close(self, angles, ranges, command) -> Optional[str]:
-        """Why the scan forbids moving (something inside the safety margin on the side the
-        command drives to), or None."""
+        """Why the scan forbids moving (anything inside the safety margin), or None."""
         ranges, angles = np.asarray(ranges, float), np.asarray(angles, float)
-        limit = self.safety["robot_radius"] + self.safety["stop_margin"] + self.laser_offset
-        direction = 0.0 if command[0] >= 0 else math.pi
-        facing = np.cos(angles - direction) > 0.0
-        close = facing & np.isfinite(ranges) & (ranges < limit)
+        limit = self.safety["robot_radius"] + self.safety["stop_margin"]
+        finite = np.where(np.isfinite(ranges), ranges, np.inf)
+        with np.errstate(invalid="ignore"):     # distances from the base (the laser is ahead)
+            distance = np.hypot(self.laser_offset + finite * np.cos(angles), finite * np.sin(angles))
+        close = distance < limit
         if not close.any():
             return None
-        nearest = int(np.argmin(np.where(close, ranges, np.inf)))
-        return (f"scan {ranges[nearest]:.2f} m at {math.degrees(angles[nearest]):.0f} deg inside "
+        nearest = int(np.argmin(np.where(close, distance, np.inf)))
+        return (f"scan {distance[nearest]:.2f} m at {math.degrees(angles[nearest]):.0f} deg inside "
                 f"the {limit:.2f} m safety margin")
 
 

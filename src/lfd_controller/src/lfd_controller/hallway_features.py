@@ -36,6 +36,7 @@ HALLWAY_STATE_FEATURES = ("waypoint_heading", "path_progress", "wall_proximity",
                           "wall_proximity_0.5", "people_proximity", "people_room",
                           "people_predicted", "speed_squared", "turn_squared")
 CONTROL_FEATURES = ("speed_effort", "turn_effort")
+BLOCKING = 0.6
 # What the features mean: progress and facing the waypoint are never worse; nearness to walls
 # and people and effort never better.
 HALLWAY_SIGNS = {"waypoint_heading": 1, "path_progress": 1, "wall_proximity": -1,
@@ -46,29 +47,61 @@ HALLWAY_SIGNS = {"waypoint_heading": 1, "path_progress": 1, "wall_proximity": -1
 
 @dataclass
 class HallwayTask:
-    """One planning instant: waypoint (2,), the final goal (2,), scan points (M, 2) fixed in the
-    map, people (P, 2) seen at time `now` moving at `velocities` (P, 2)."""
+    """One planning instant: waypoint (2,), the final destination (2,), scan points (M, 2) fixed
+    in the map, people (P, 2) seen at time `now` moving at `velocities` (P, 2).
+
+    For the planner's detour seeds and unstall rule it also reads as a one-obstacle task:
+    `goal` is the waypoint and `obstacle_position(t)` the blocker - the nearest person or scan
+    point within `BLOCKING` m of the straight way from `robot` (x, y) to the waypoint (the
+    waypoint itself when nothing blocks: detours then pass beside it)."""
 
     waypoint: np.ndarray
-    goal: np.ndarray
+    destination: np.ndarray
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     people: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     now: float = 0.0
+    robot: Optional[np.ndarray] = None
 
     def __post_init__(self):
         self.waypoint = np.asarray(self.waypoint, float).reshape(2)
-        self.goal = np.asarray(self.goal, float).reshape(2)
+        self.destination = np.asarray(self.destination, float).reshape(2)
         self.points = np.asarray(self.points, float).reshape(-1, 2)
         self.people = np.asarray(self.people, float).reshape(-1, 2)
         self.velocities = np.asarray(self.velocities, float).reshape(-1, 2)
         if self.people.shape != self.velocities.shape:
             raise LfdError(f"{len(self.people)} people but {len(self.velocities)} velocities")
+        self._blocker = self._find_blocker()
+
+    @property
+    def goal(self) -> np.ndarray:
+        return self.waypoint
 
     def people_at(self, times) -> np.ndarray:
         """Predicted positions (T, P, 2) at times (T,)."""
         lead = np.asarray(times, float).reshape(-1, 1, 1) - self.now
         return self.people[None] + lead * self.velocities[None]
+
+    def obstacle_position(self, t) -> np.ndarray:
+        where, velocity = self._blocker
+        lead = np.asarray(t, float)[..., None] - self.now
+        return where + lead * velocity
+
+    def _find_blocker(self):
+        if self.robot is None:
+            return self.waypoint, np.zeros(2)
+        start = np.asarray(self.robot, float)[:2]
+        span = self.waypoint - start
+        length2 = max(float(span @ span), 1e-9)
+        things = np.vstack([self.people, self.points])
+        motion = np.vstack([self.velocities, np.zeros_like(self.points)])
+        along = np.clip((things - start) @ span / length2, 0.0, 1.0)
+        gap = np.hypot(*(start + along[:, None] * span - things).T)
+        near = np.flatnonzero((gap < BLOCKING) & (along > 0.0))
+        if not len(near):
+            return self.waypoint, np.zeros(2)
+        first = near[np.argmin(np.hypot(*(things[near] - start).T))]
+        return things[first], motion[first]
 
 
 def in_sight(pose, angles, ranges, *, margin: float = 0.3) -> Callable[[np.ndarray], bool]:
@@ -147,12 +180,24 @@ class PathFollower:
         near = np.flatnonzero((self.arc >= self.progress - self.lookahead)
                               & (self.arc <= self.progress + self.window))
         if len(near):
-            best = near[np.argmin(np.hypot(*(self.path[near] - position).T))]
-            self.progress = max(self.progress - self.lookahead, float(self.arc[best]))
+            self.progress = max(self.progress - self.lookahead, self._nearest(position, near))
         ahead = self.lookahead
         while visible is not None and ahead > 0.5 and not visible(self.point_at(self.progress + ahead)):
             ahead -= 0.25
         return self.point_at(self.progress + ahead)
+
+    def _nearest(self, position, near) -> float:
+        """Arc length of the point nearest `position` on the segments starting at `near`."""
+        first, last = int(near[0]), min(int(near[-1]) + 1, len(self.path) - 1)
+        if last <= first:
+            return float(self.arc[first])
+        a, b = self.path[first:last], self.path[first + 1:last + 1]
+        span = b - a
+        length2 = np.maximum((span ** 2).sum(axis=1), 1e-12)
+        along = np.clip(((position - a) * span).sum(axis=1) / length2, 0.0, 1.0)
+        gaps = np.hypot(*(a + along[:, None] * span - position).T)
+        k = int(np.argmin(gaps))
+        return float(self.arc[first + k] + along[k] * np.sqrt(length2[k]))
 
     def distance_to_path(self, position) -> float:
         return float(np.hypot(*(self.point_at(self.progress) - np.asarray(position, float)[:2])))
