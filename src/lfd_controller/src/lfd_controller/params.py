@@ -101,6 +101,18 @@ class RewardControllerParams(NodeConfig):
                                 "(person rewards: 1.5); 0: off")
     frame: str = param("odom", "frame of the published plan")
     enabled: bool = param(True, "drive from the start (service ~enable switches)")
+    lookahead: float = param(4.0, "path mode (a hallway reward): the local waypoint this far (m) "
+                                  "along the path, or the furthest point up to there in the "
+                                  "scan's sight")
+    safety_margin: float = param(0.05, "path mode: zero command while the scan shows anything "
+                                       "within this distance (m) of the robot's edge")
+    blocked_after: float = param(20.0, "path mode: held up this long (s), the path is reported "
+                                       "blocked (ERROR on /diagnostics) and the robot stays "
+                                       "stopped until a new path or goal")
+    laser_offset: float = param(0.1, "path mode: the laser frame's distance ahead of the base (m)")
+    person_radius: float = param(0.25, "path mode: radius of a tracked person (m)")
+    barrier_margin: float = param(0.1, "path mode: fixed barrier this far (m) beyond touching a "
+                                       "scan point or a person")
     reward_settings: bool = param(True, "drive with the controller settings saved with the reward "
                                         "(learn_reward --kind person saves horizon, plan_dt, "
                                         "terminal, detour, spread_seeds, discount, "
@@ -124,9 +136,21 @@ class RewardControllerParams(NodeConfig):
                               f"got {self.min_horizon!r}")
         if self.arrival < 0:
             raise ConfigError(f"~arrival must be >= 0 (0: off), got {self.arrival!r}")
+        for name in ("lookahead", "blocked_after", "barrier_margin", "person_radius"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"~{name} must be positive, got {getattr(self, name)!r}")
+        if self.safety_margin < 0 or self.laser_offset < 0:
+            raise ConfigError(f"~safety_margin and ~laser_offset must be >= 0, got "
+                              f"{self.safety_margin!r}, {self.laser_offset!r}")
         if self.unstall < 0 or (self.unstall > 0 and self.detour <= 0):
             raise ConfigError(f"~unstall must be >= 0 (0: off) and needs ~detour > 0, got "
                               f"{self.unstall!r}")
+
+    def hallway_safety(self) -> Dict[str, float]:
+        """The path mode's safety settings (lfd_controller.hallway.HALLWAY_SAFETY's keys)."""
+        return {"robot_radius": self.robot_radius, "person_radius": self.person_radius,
+                "barrier_margin": self.barrier_margin, "stop_margin": self.safety_margin,
+                "blocked_after": self.blocked_after, "lookahead": self.lookahead}
 
     def limits(self) -> UnicycleLimits:
         """The robot's limits (ModelError when one is not positive)."""

@@ -11,6 +11,7 @@ import numpy as np
 
 from lfd_controller.errors import NotFittedError, RewardFileError
 from lfd_controller.features import FeatureSet, FeatureValues, Task
+from lfd_controller.hallway_features import HallwayFeatures
 
 
 @dataclass
@@ -153,7 +154,11 @@ def reward_from_dict(data) -> object:
     if not isinstance(data, dict) or data.get("kind") not in ("linear", "gp"):
         raise RewardFileError("a reward needs kind 'linear' or 'gp'")
     try:
-        features = FeatureSet(**(data.get("features") or {}))
+        params = dict(data.get("features") or {})
+        if params.pop("kind", None) == HallwayFeatures.kind:
+            features = HallwayFeatures(**params)
+        else:
+            features = FeatureSet(**params)
         if data["kind"] == "linear":
             weights = data["weights"]
             missing = [name for name in features.names if name not in weights]

@@ -12,9 +12,11 @@ from std_srvs.srv import SetBool, SetBoolResponse
 from threadpoolctl import threadpool_limits
 
 from lfd_controller.features import Task
+from lfd_controller.hallway_features import HallwayFeatures
 from lfd_controller.learning import controller_settings, load_reward
 from lfd_controller.params import RewardControllerParams
 from lfd_controller.planner import CollisionBarrier, RecedingHorizonController
+from lfd_controller.ros_hallway_controller import HallwayControllerNode
 from robot_common.errors import ModelError, TaskError
 from robot_common.maps import yaw_to_quaternion
 from robot_common.ros_node import odom_state, read_config
@@ -23,7 +25,9 @@ from robot_common.unicycle import Unicycle
 
 
 class RewardControllerNode:
-    """Re-plans from the latest odometry at ~rate Hz and publishes the first command.
+    """Re-plans from the latest odometry at ~rate Hz and publishes the first command (a reward
+    learned over the one-obstacle features; a hallway reward runs ros_hallway_controller's
+    HallwayControllerNode instead: path, scan, people, map).
 
     Parameters (lfd_controller.params.RewardControllerParams; config/reward_controller.yaml):
       ~reward_file (str, required): a reward saved by learn_reward,
@@ -186,4 +190,7 @@ def start() -> RewardControllerNode:
     config = config.with_reward_settings(saved)
     if saved and config.reward_settings:
         rospy.loginfo("driving with the controller settings saved with the reward: %s", saved)
+    if isinstance(getattr(reward, "features", None), HallwayFeatures):
+        rospy.loginfo("a hallway reward: path mode (path, scan, people, map)")
+        return HallwayControllerNode(reward, config).setup()
     return RewardControllerNode(reward, config).setup()

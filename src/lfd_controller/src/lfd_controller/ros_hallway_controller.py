@@ -1,0 +1,171 @@
+"""HallwayControllerNode: reward_controller's path mode (a hallway reward file)."""
+import threading
+import time
+from typing import Optional
+
+import numpy as np
+import rospy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped, Twist
+from nav_msgs.msg import OccupancyGrid, Odometry, Path
+from sensor_msgs.msg import LaserScan
+from std_msgs.msg import Float64
+from std_srvs.srv import SetBool, SetBoolResponse
+
+from lfd_controller.hallway import HALLWAY_DRIVING, HallwayController
+from lfd_controller.params import RewardControllerParams
+from robot_common.gridplan import NoPathError, plan_path
+from robot_common.msg import People
+from robot_common.ros_maps import msg_to_grid
+from robot_common.ros_node import odom_state
+from robot_common.unicycle import Unicycle
+
+__all__ = ["HallwayControllerNode"]
+
+LEVELS = {"following": DiagnosticStatus.OK, "arrived": DiagnosticStatus.OK,
+          "waiting": DiagnosticStatus.OK, "stopped": DiagnosticStatus.WARN,
+          "blocked": DiagnosticStatus.ERROR, "no path": DiagnosticStatus.WARN}
+
+
+class HallwayControllerNode:
+    """Follows a path through a building among people with a hallway reward (lfd_controller.
+    hallway.HallwayController) at ~rate Hz.
+
+    Parameters: RewardControllerParams (config/reward_controller.yaml): ~rate (cycle budget
+      1/rate), ~max_iter, the limits, ~robot_radius, ~goal_tolerance, ~frame, ~enabled and the
+      path mode's ~lookahead (4.0 m), ~safety_margin (0.05 m), ~blocked_after (20 s),
+      ~laser_offset (0.1 m), ~person_radius (0.25 m), ~barrier_margin (0.1 m).
+    Topics in: odom (nav_msgs/Odometry, pose in the path's frame), path (nav_msgs/Path: the
+      global plan, e.g. move_base's; followed from its first pose), goal (geometry_msgs/
+      PoseStamped: planned on the map with robot_common.gridplan when no path comes), map
+      (nav_msgs/OccupancyGrid, latched), scan (sensor_msgs/LaserScan), people (robot_common/
+      People: tracked positions and velocities, the layout of people_msgs/People).
+    Topics out: cmd_vel (geometry_msgs/Twist), ~cycle_time (std_msgs/Float64), /diagnostics
+      (diagnostic_msgs/DiagnosticArray, name "reward_controller: path"): OK following (progress,
+      waypoint) / arrived, WARN stopped (what the scan shows inside the margin) or no path, ERROR
+      blocked (held up longer than ~blocked_after: the robot stays stopped until a new path).
+    Services: ~enable (std_srvs/SetBool).
+    """
+
+    def __init__(self, reward, config: RewardControllerParams):
+        self.reward, self.config, self.lock = reward, config, threading.Lock()
+        self.model = Unicycle(0.1, config.limits())
+        self.settings = dict(HALLWAY_DRIVING, max_iter=config.max_iter)
+        self.enabled = config.enabled
+        self.controller: Optional[HallwayController] = None
+        self.state = self.scan = self.grid = None
+        self.people = (np.zeros((0, 2)), np.zeros((0, 2)))
+        self.status = "no path"
+        self.origin = time.monotonic()
+
+    def setup(self) -> "HallwayControllerNode":
+        self.cmd = rospy.Publisher("cmd_vel", Twist, queue_size=5)
+        self.cycle = rospy.Publisher("~cycle_time", Float64, queue_size=10)
+        self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=5)
+        rospy.Subscriber("odom", Odometry, self.on_odom, queue_size=1)
+        rospy.Subscriber("path", Path, self.on_path, queue_size=1)
+        rospy.Subscriber("goal", PoseStamped, self.on_goal, queue_size=1)
+        rospy.Subscriber("map", OccupancyGrid, self.on_map, queue_size=1)
+        rospy.Subscriber("scan", LaserScan, self.on_scan, queue_size=1)
+        rospy.Subscriber("people", People, self.on_people, queue_size=1)
+        rospy.Service("~enable", SetBool, self.on_enable)
+        self.timer = rospy.Timer(rospy.Duration(1.0 / self.config.rate), self.tick)
+        return self
+
+    def follow(self, points: np.ndarray, source: str) -> None:
+        with self.lock:
+            self.controller = HallwayController(
+                self.reward, points, self.model, budget=1.0 / self.config.rate,
+                goal_tolerance=self.config.goal_tolerance, laser_offset=self.config.laser_offset,
+                settings=self.settings, safety=self.config.hallway_safety())
+            self.source, self.status = source, "following"
+        rospy.loginfo(f"reward_controller: following {source} ({len(points)} poses, "
+                      f"{self.controller.follower.length:.1f} m)")
+
+    def on_path(self, msg: Path) -> None:
+        points = np.array([[p.pose.position.x, p.pose.position.y] for p in msg.poses])
+        if len(points) < 1:
+            rospy.logwarn("reward_controller: ignored an empty path")
+            return
+        self.follow(points, f"the path on {rospy.resolve_name('path')}")
+
+    def on_goal(self, msg: PoseStamped) -> None:
+        with self.lock:
+            grid, state = self.grid, self.state
+        goal = (msg.pose.position.x, msg.pose.position.y)
+        if grid is None or state is None:
+            rospy.logwarn("reward_controller: a goal needs the map and odometry to plan a path")
+            return
+        try:
+            points = plan_path(grid, state[0][:2], goal, clearance=self.config.robot_radius + 0.1)
+        except NoPathError as err:
+            with self.lock:
+                self.controller, self.status = None, f"no path: {err}"
+            self.cmd.publish(Twist())
+            return
+        self.follow(points, f"a planned path to ({goal[0]:.1f}, {goal[1]:.1f})")
+
+    def on_map(self, msg: OccupancyGrid) -> None:
+        grid = msg_to_grid(msg)
+        with self.lock:
+            self.grid = grid
+
+    def on_odom(self, msg: Odometry) -> None:
+        with self.lock:
+            self.state = (np.array(odom_state(msg)), time.monotonic())
+
+    def on_scan(self, msg: LaserScan) -> None:
+        angles = msg.angle_min + msg.angle_increment * np.arange(len(msg.ranges))
+        ranges = np.asarray(msg.ranges, float)
+        ranges[(ranges < msg.range_min) | (ranges > msg.range_max)] = np.inf
+        with self.lock:
+            self.scan = (angles, ranges)
+
+    def on_people(self, msg: People) -> None:
+        positions = np.array([[p.position.x, p.position.y] for p in msg.people]).reshape(-1, 2)
+        velocities = np.array([[p.velocity.x, p.velocity.y] for p in msg.people]).reshape(-1, 2)
+        with self.lock:
+            self.people = (positions, velocities)
+
+    def on_enable(self, request):
+        with self.lock:
+            self.enabled = bool(request.data)
+        if not request.data:
+            self.cmd.publish(Twist())
+        return SetBoolResponse(True, "driving" if request.data else "stopped")
+
+    def tick(self, _event) -> None:
+        with self.lock:
+            controller, state, scan, people = self.controller, self.state, self.scan, self.people
+            enabled = self.enabled
+        if not enabled or controller is None or state is None or scan is None:
+            self.report(controller)
+            return
+        started = time.perf_counter()
+        command = controller.act(state[0], time.monotonic() - self.origin, scan[0], scan[1],
+                                 people[0], people[1])
+        self.cycle.publish(Float64(time.perf_counter() - started))
+        twist = Twist()
+        twist.linear.x, twist.angular.z = float(command[0]), float(command[1])
+        self.cmd.publish(twist)
+        with self.lock:
+            self.status = controller.status_
+        self.report(controller)
+
+    def report(self, controller: Optional[HallwayController]) -> None:
+        with self.lock:
+            status, enabled, scan = self.status, self.enabled, self.scan
+        message = status if enabled else "disabled"
+        if enabled and controller is not None and scan is None:
+            message = "waiting for scan"
+        item = DiagnosticStatus(name="reward_controller: path", hardware_id="lfd_controller",
+                                level=LEVELS.get(message.split(":")[0], DiagnosticStatus.OK),
+                                message=message)
+        if controller is not None:
+            follower = controller.follower
+            item.values = [KeyValue("following", self.source),
+                           KeyValue("progress_m", f"{follower.progress:.2f}"),
+                           KeyValue("length_m", f"{follower.length:.2f}")]
+        array = DiagnosticArray(status=[item])
+        array.header.stamp = rospy.Time.now()
+        self.diagnostics.publish(array)

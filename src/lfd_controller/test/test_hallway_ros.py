@@ -1,0 +1,89 @@
+"""reward_controller's path mode for real (roscore, roslaunch): with a hallway reward it follows
+a nav_msgs/Path, stops for what the scan shows inside its safety margin and says so on
+/diagnostics."""
+import math
+
+import numpy as np
+import pytest
+import rospy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseStamped, Twist
+from nav_msgs.msg import Odometry, Path
+from sensor_msgs.msg import LaserScan
+
+from robot_common.msg import People
+from ros_harness import wait_until
+
+pytestmark = pytest.mark.ros
+
+
+def hallway_reward_file(tmp_path):
+    from lfd_controller.hallway_features import HallwayFeatures
+    from lfd_controller.learning import save_reward
+    from lfd_controller.rewards import LinearReward
+    features = HallwayFeatures()
+    weights = dict.fromkeys(features.names, 0.0)
+    weights.update(path_progress=10.0, speed_squared=-10.0, turn_squared=-1.0, speed_effort=-1.0,
+                   turn_effort=-1.0, wall_proximity=-1.0, people_proximity=-5.0)
+    return save_reward(LinearReward([weights[n] for n in features.names], features),
+                       tmp_path / "hallway_reward.yaml")
+
+
+class Latest:
+    def __init__(self, topic, kind):
+        self.msg = None
+        self.sub = rospy.Subscriber(topic, kind, self.keep, queue_size=5)
+
+    def keep(self, msg):
+        self.msg = msg
+
+
+def scan_msg(nearest_ahead):
+    msg = LaserScan()
+    msg.header.stamp, msg.header.frame_id = rospy.Time.now(), "laser"
+    msg.angle_min, msg.angle_increment = -math.pi, 2 * math.pi / 72
+    msg.angle_max = msg.angle_min + 71 * msg.angle_increment
+    msg.range_min, msg.range_max = 0.05, 8.0
+    ranges = np.full(72, 1.2)                  # walls 1.2 m off the laser all round
+    ranges[36] = nearest_ahead                 # straight ahead
+    msg.ranges = ranges.tolist()
+    return msg
+
+
+def test_path_mode_follows_the_path_and_stops_inside_the_safety_margin(rospy_node, roslaunch,
+                                                                       tmp_path):
+    launch = roslaunch("lfd_controller", "controller.launch", with_sim="false",
+                       reward_file=str(hallway_reward_file(tmp_path)))
+    launch.wait_for_subscribers(["/path", "/scan", "/people", "/odom"], timeout=120)
+    publishers = {name: rospy.Publisher(f"/{name}", kind, queue_size=2, latch=True)
+                  for name, kind in (("odom", Odometry), ("scan", LaserScan), ("people", People),
+                                     ("path", Path))}
+    cmd, diagnostics = Latest("/cmd_vel", Twist), Latest("/diagnostics", DiagnosticArray)
+    path = Path()
+    path.header.frame_id = "odom"
+    for x in np.linspace(0.0, 6.0, 13):
+        pose = PoseStamped()
+        pose.pose.position.x, pose.pose.orientation.w = x, 1.0
+        path.poses.append(pose)
+    publishers["path"].publish(path)
+    publishers["people"].publish(People())
+    odom = Odometry()
+    odom.pose.pose.orientation.w = 1.0
+    ahead = {"range": 4.0}
+
+    def sensors():
+        odom.header.stamp = rospy.Time.now()
+        publishers["odom"].publish(odom)
+        publishers["scan"].publish(scan_msg(ahead["range"]))
+
+    def status(level, start):
+        sensors()
+        item = diagnostics.msg.status[0] if diagnostics.msg is not None else None
+        return item is not None and item.level == level and item.message.startswith(start)
+    wait_until(lambda: status(DiagnosticStatus.OK, "following") and cmd.msg is not None
+               and cmd.msg.linear.x > 0.05, 120, what="driving forward along the path")
+    keys = {kv.key: kv.value for kv in diagnostics.msg.status[0].values}
+    assert keys["following"] == "the path on /path" and float(keys["length_m"]) == pytest.approx(6.0)
+    ahead["range"] = 0.12                      # 0.1 + 0.12 m from the base: inside 0.18 + 0.05
+    wait_until(lambda: status(DiagnosticStatus.WARN, "stopped: scan") and cmd.msg.linear.x == 0.0
+               and cmd.msg.angular.z == 0.0, 120, what="a zero command and the reason")
