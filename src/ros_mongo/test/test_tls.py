@@ -1,11 +1,12 @@
 """An https central signed by a private CA: a real Apache CouchDB node configured for TLS here
 ([ssl] with a server certificate made by `openssl` in the test's tmp dir, signed by a CA made
 there too; skipped where ../shared/couchdb or openssl is absent). Direct recording (the store the
-recorder writes through), the changes follower and a robot store's push replication reach it
+recorder writes through), the changes follower, the CLI and a robot store's push replication reach it
 with the CA file; without it every path refuses with the certificate failure, the password never
 shown."""
 import shutil
 import subprocess
+import sys
 
 import pytest
 from std_msgs.msg import String
@@ -79,6 +80,17 @@ def test_https_central_with_a_private_ca_for_recording_following_and_replication
         follower.close()
     with pytest.raises(ReplicationRefused, match="CERTIFICATE_VERIFY_FAILED"):
         ChangesFollower(url).poll()
+    # the CLI, its password from a file
+    user = tls_central.member[0]
+    credentials = tmp_path / "credentials"
+    credentials.write_text(f"{user}:{password}\n")
+    plain = url.replace(f"{user}:{password}@", "")
+    cli = [sys.executable, "-c", "import sys; from ros_mongo.cli import main; sys.exit(main())", "info",
+           "--db-url", plain, "--db-credentials-file", str(credentials)]
+    run = subprocess.run(cli + ["--db-tls-ca-file", ca], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0 and "/chatter" in run.stdout, run.stderr
+    run = subprocess.run(cli, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 1 and "CERTIFICATE_VERIFY_FAILED" in run.stderr and password not in run.stderr
     # replication: the robot's store (pouchdb-server, trusting the CA as node does) pushes; the
     # replicator's own checks (reachability, pending documents) go through the one client
     monkeypatch.setenv("NODE_EXTRA_CA_CERTS", ca)

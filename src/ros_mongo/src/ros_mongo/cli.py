@@ -48,6 +48,8 @@ __all__ = ["main"]
 
 DEFAULT_URL = "http://127.0.0.1:5984/robot_data"
 URL_ENV = "ROS_MONGO_DB_URL"
+_TLS_OPTIONS = (("ca", "a CA bundle for a private CA"), ("cert", "a client certificate (PEM)"),
+                ("key", "the client certificate's key (PEM), if not in the certificate file"))
 
 
 def parse_args(argv: List[str]) -> argparse.Namespace:
@@ -58,6 +60,8 @@ def parse_args(argv: List[str]) -> argparse.Namespace:
                         help=f"database URL, password-free (default ${URL_ENV}, else {DEFAULT_URL})")
     parser.add_argument("--db-credentials-file", default=None,
                         help=f"file holding 'user:password' or 'password' (else ${PASSWORD_ENV})")
+    for name, meaning in _TLS_OPTIONS:
+        parser.add_argument(f"--db-tls-{name}-file", default=None, help=f"https CouchDB: {meaning}")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     commands = parser.add_subparsers(dest="command", required=True)
     up = commands.add_parser("import", help="store the messages of bags or MCAP files")
@@ -108,6 +112,8 @@ def parse_args(argv: List[str]) -> argparse.Namespace:
     for sub in commands.choices.values():  # options work before or after the command
         sub.add_argument("--db-url", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
         sub.add_argument("--db-credentials-file", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
+        for name, _ in _TLS_OPTIONS:
+            sub.add_argument(f"--db-tls-{name}-file", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
         sub.add_argument("--no-progress", action="store_true", default=argparse.SUPPRESS,
                          help=argparse.SUPPRESS)
     return parser.parse_args(argv)
@@ -198,6 +204,16 @@ def _migrate(args: argparse.Namespace, store, progress: bool) -> None:
         print(line)
 
 
+def _tls(args: argparse.Namespace) -> dict:
+    """The given --db-tls-*-file options as open_store's tls_*_file (https CouchDB only)."""
+    given = {f"tls_{name}_file": getattr(args, f"db_tls_{name}_file", None) for name, _ in _TLS_OPTIONS}
+    given = {key: value for key, value in given.items() if value}
+    if given and not args.db_url.lower().startswith("https://"):
+        raise StoreError("--db-tls-ca-file / --db-tls-cert-file / --db-tls-key-file need an https:// "
+                         "CouchDB URL (MongoDB: the URL options tlsCAFile, tlsCertificateKeyFile)")
+    return given
+
+
 def run(args: argparse.Namespace) -> None:
     progress = not args.no_progress
     warning = password_warning(args.db_url,
@@ -206,7 +222,7 @@ def run(args: argparse.Namespace) -> None:
         print(f"WARNING: {warning}", file=sys.stderr)
     if args.command == "convert":
         args = _convert_args(args)
-    with open_store(args.db_url, credentials_file=args.db_credentials_file) as store:
+    with open_store(args.db_url, credentials_file=args.db_credentials_file, **_tls(args)) as store:
         if args.command == "migrate":
             _migrate(args, store, progress)
         elif args.command == "setup":
