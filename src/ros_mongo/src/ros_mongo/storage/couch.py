@@ -21,10 +21,8 @@ database and the Mango indexes (design documents) is tried once, when the accoun
 it is skipped with one warning, and reads go through `_all_docs` id ranges (ids sort by receive
 time) with `_find` (no sort) doing the matching: the same answers, slower.
 
-URLs: `http(s)://[user:pass@]host[:port][/prefix...]/dbname`: the last path segment is the
-database (write a "/" inside a database name as %2F); anything before it is a reverse proxy's path
-prefix. TLS: `tls_ca_file` (a private CA bundle), `tls_cert_file` + `tls_key_file` (a client
-certificate), `tls_verify=False` only for testing.
+URLs, credentials, TLS options (`tls_ca_file`, `tls_cert_file`, `tls_key_file`, `tls_verify`)
+and the mapping of answers to errors: ros_mongo.storage.couch_client, the one CouchDB client.
 
 Answers (see ros_mongo.errors): connection errors, timeouts, a truncated or non-JSON body, 429,
 5xx (500 `timeout` included) -> StoreUnavailable (a `_bulk_docs` answer may take `timeout` plus

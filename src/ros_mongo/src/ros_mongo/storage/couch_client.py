@@ -2,7 +2,7 @@
 
 `CouchClient(url)` reaches one database (`http(s)://[user:pass@]host[:port][/prefix...]/dbname`,
 the last path segment the database, "%2F" for a "/" inside its name; anything before it a reverse
-proxy's path prefix) or, with `database=False`, a server root. Credentials: the URL's userinfo
+proxy's path prefix) and its server's root (`server=True`). Credentials: the URL's userinfo
 (`urls.split_credentials`: percent-decoded, up to the last '@', so any printable password works,
 raw or percent-encoded) sent as HTTP Basic, never shown. TLS: `tls_ca_file` (a private CA
 bundle), `tls_cert_file` + `tls_key_file` (a client certificate), `tls_verify=False` only for
@@ -41,15 +41,15 @@ _TLS_MARKERS = ("CERTIFICATE_VERIFY_FAILED", "TLSV13_ALERT_CERTIFICATE_REQUIRED"
 
 
 class CouchClient:
-    """One database (or server root) on a CouchDB-API server, over one requests.Session.
+    """One database on a CouchDB-API server, over one requests.Session.
 
     Attributes: `server_url` (root, with any proxy prefix, no credentials), `name` (the database,
-    decoded; "" for a server root), `db_url`, `auth` ((user, password) or None), `shown` (the
+    decoded), `db_url`, `auth` ((user, password) or None), `shown` (the
     redacted URL), `timeout` (seconds per request)."""
 
     def __init__(self, url: str, *, timeout: float = 30.0, tls_ca_file: Optional[str] = None,
                  tls_cert_file: Optional[str] = None, tls_key_file: Optional[str] = None,
-                 tls_verify: bool = True, errors: ErrorFamily = STORE_ERRORS, database: bool = True):
+                 tls_verify: bool = True, errors: ErrorFamily = STORE_ERRORS):
         check_url(url)
         self.errors = errors
         if not url.lower().startswith(("http://", "https://")):
@@ -61,13 +61,12 @@ class CouchClient:
         scheme, rest = bare.split("://", 1)
         host, _, path = rest.partition("/")
         segments = [s for s in path.split("/") if s]
-        if database and not segments:
+        if not segments:
             raise errors.base(f"URL names no database: {self.shown!r}")
-        self.name = unquote(segments[-1]) if database else ""
-        prefix = "/".join(segments[:-1] if database else segments)
+        self.name = unquote(segments[-1])
+        prefix = "/".join(segments[:-1])
         self.server_url = f"{scheme.lower()}://{host}" + (f"/{prefix}" if prefix else "")
-        self.db_url = (f"{self.server_url}/{quote(self.name, safe='')}" if database
-                       else self.server_url)
+        self.db_url = f"{self.server_url}/{quote(self.name, safe='')}"
         self.timeout = float(timeout)
         self.tls = (tls_ca_file, tls_cert_file, tls_key_file, tls_verify)
         self.session = requests.Session()
