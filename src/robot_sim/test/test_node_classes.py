@@ -85,3 +85,13 @@ def test_people_sim_builds_the_generated_building_or_a_given_map():
     node = PeopleSimNode(PeopleSimParams(cell_size=1.0))
     from_map = PeopleSimNode(PeopleSimParams(cell_size=1.0), grid=node.sim.cells.grid)
     assert from_map.sim.cells.n_cells == node.sim.cells.n_cells > 0
+
+
+def test_sensor_sim_with_a_crowd_builds_its_people_and_tracker_from_the_parameters():
+    sim = SensorSim(SensorSimParams.from_mapping({"crowd": True, "miss_rate": 0.2,
+                                                  "false_positive_rate": 0.05, "seed": 0}))
+    assert sim.crowd is not None and sim.crowd.radius == 0.25
+    assert (sim.tracker.miss_rate, sim.tracker.false_positive_rate) == (0.2, 0.05)
+    assert SensorSim(SensorSimParams(seed=0)).crowd is None
+    with pytest.raises(ConfigError, match="~miss_rate and ~false_positive_rate must be in"):
+        SensorSimParams.from_mapping({"miss_rate": 1.0})

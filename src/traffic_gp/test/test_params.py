@@ -51,3 +51,19 @@ def test_errors_follow_the_workspace_convention():
     assert issubclass(TrafficError, robot_common.errors.WorkspaceError)
     import traffic_gp.errors
     assert not hasattr(traffic_gp.errors, "ConfigError")      # the workspace's one ConfigError
+
+
+def test_the_people_counter_s_generated_yaml_holds_its_defaults_and_bad_values_are_refused():
+    import yaml
+
+    from traffic_gp.params import PeopleCounterParams
+
+    path = CONFIG_YAML.with_name("people_counter.yaml")
+    assert PeopleCounterParams.from_mapping(yaml.safe_load(path.read_text())) == PeopleCounterParams()
+    config = PeopleCounterParams()
+    assert (config.watch, config.max_range, config.min_detections) == (10.0, 8.0, 3)
+    assert config.dwell_time == TrafficServerParams().dwell_time     # the server's exposure
+    with pytest.raises(ConfigError, match="~max_range and ~dwell_time must be positive"):
+        PeopleCounterParams.from_mapping({"max_range": 0.0})
+    with pytest.raises(ConfigError, match="~min_detections must be >= 1"):
+        PeopleCounterParams.from_mapping({"min_detections": 0})
