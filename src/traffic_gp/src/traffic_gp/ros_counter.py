@@ -71,7 +71,8 @@ class PeopleCounterNode:
       ~map_frame to the scan's and the people's frames.
     Publishes: `people_counts` (robot_common/PeopleCount: the cells seen in a watch, their seen
       part, the people counted in each; header.stamp the watch's start).
-    Services: `~status` (std_srvs/Trigger: scans used and skipped, and why; watches published).
+    Services: `~status` (std_srvs/Trigger: scans used and skipped, and why; watches published,
+      people counted).
     A scan is used only with a people message within ~people_timeout of its stamp and a
     transform to the map: without a tracker nothing is counted (no row says "nobody there").
     """
@@ -84,7 +85,8 @@ class PeopleCounterNode:
         self._people_lock = threading.Lock()
         self._stop = threading.Event()
         self.tally = {"scans used": 0, "no people message": 0, "no transform": 0,
-                      "watches published": 0, "people messages": 0, "other people types": 0}
+                      "watches published": 0, "people counted": 0, "people messages": 0,
+                      "other people types": 0}
         self.robot_id = config.robot_id
 
     def setup(self) -> None:
@@ -215,6 +217,7 @@ class PeopleCounterNode:
         msg.counts = watch.counts.tolist()
         self.publisher.publish(msg)
         self.tally["watches published"] += 1
+        self.tally["people counted"] += int(watch.counts.sum())
 
 
 def start() -> PeopleCounterNode:
