@@ -41,8 +41,8 @@ class BehaviourCloning:
 
     def fit(self, demos) -> "BehaviourCloning":
         inputs, targets = [], []
-        for demo in demos:
-            task = Task.from_scenario(demo.scenario)
+        for demo in demos:       # a demonstration with its own task (a hallway window) uses it
+            task = getattr(demo, "task", None) or Task.from_scenario(demo.scenario)
             states, times = demo.trajectory(), demo.times()
             for k, action in enumerate(demo.actions):
                 inputs.append(observation(states[k], times[k], task, demo.scenario.dt))

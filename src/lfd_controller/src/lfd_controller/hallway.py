@@ -34,7 +34,8 @@ from lfd_controller.planner import RecedingHorizonController
 from lfd_controller.rewards import RewardDerivatives
 from robot_common.tasks import ObstacleMotion, Scenario
 
-__all__ = ["HALLWAY_DRIVING", "HallwayBarrier", "HallwayController", "HallwayDemonstration",
+__all__ = ["HALLWAY_DRIVING", "HALLWAY_SAFETY", "TaskBuilder", "HallwayBarrier", "HallwayController",
+           "HallwayDemonstration",
            "HallwayCIOC", "hallway_scenario", "fit_hallway_reward", "hallway_windows",
            "task_from_view"]
 
@@ -72,6 +73,27 @@ def task_from_view(waypoint, goal, pose, angles, ranges, people, velocities, now
     points = scan_points(laser, angles, ranges, people=people)
     return HallwayTask(waypoint, goal, points, people, np.asarray(velocities, float).reshape(-1, 2),
                        now, robot=np.array([x, y]))
+
+
+class TaskBuilder:
+    """The HallwayTask of each cycle along one path: the local waypoint (PathFollower, in the
+    scan's sight) and task_from_view. What the controller, the recorded demonstrations and the
+    benchmark's baselines all plan with."""
+
+    def __init__(self, path, *, lookahead: float = 4.0, laser_offset: float = 0.0):
+        self.follower = PathFollower(path, lookahead=lookahead)
+        self.laser_offset = float(laser_offset)
+
+    @property
+    def goal(self) -> np.ndarray:
+        return self.follower.path[-1]
+
+    def __call__(self, state, t: float, angles, ranges, people, velocities) -> HallwayTask:
+        laser = (state[0] + self.laser_offset * math.cos(state[2]),
+                 state[1] + self.laser_offset * math.sin(state[2]), state[2])
+        waypoint = self.follower.update(state[:2], in_sight(laser, angles, ranges))
+        return task_from_view(waypoint, self.goal, state, angles, ranges, people, velocities, t,
+                              self.laser_offset)
 
 
 class HallwayBarrier:
@@ -122,7 +144,9 @@ class HallwayController:
     safety: Dict = field(default_factory=lambda: dict(HALLWAY_SAFETY))
 
     def __post_init__(self):
-        self.follower = PathFollower(self.path, lookahead=self.safety["lookahead"])
+        self.task = TaskBuilder(self.path, lookahead=self.safety["lookahead"],
+                                laser_offset=self.laser_offset)
+        self.follower = self.task.follower
         planned = HallwayBarrier(self.reward, robot_radius=self.safety["robot_radius"],
                                  person_radius=self.safety["person_radius"],
                                  margin=self.safety["barrier_margin"])
@@ -137,13 +161,6 @@ class HallwayController:
     @property
     def cycle_times_(self) -> List[float]:
         return self.planner.cycle_times_
-
-    def task(self, state, t: float, angles, ranges, people, velocities) -> HallwayTask:
-        laser = (state[0] + self.laser_offset * math.cos(state[2]),
-                 state[1] + self.laser_offset * math.sin(state[2]), state[2])
-        waypoint = self.follower.update(state[:2], in_sight(laser, angles, ranges))
-        return task_from_view(waypoint, self.goal, state, angles, ranges, people, velocities, t,
-                              self.laser_offset)
 
     def act(self, state, t: float, angles, ranges, people, velocities) -> np.ndarray:
         state = np.asarray(state, float)

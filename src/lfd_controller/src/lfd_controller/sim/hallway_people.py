@@ -16,8 +16,8 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
-from lfd_controller.hallway import HALLWAY_SAFETY, hallway_scenario, task_from_view
-from lfd_controller.hallway_features import PathFollower, in_sight
+from lfd_controller.hallway import HALLWAY_SAFETY, TaskBuilder, hallway_scenario
+from lfd_controller.hallway_features import PathFollower
 from lfd_controller.sim.families import make_person
 from robot_common.tasks import ObstacleMotion
 from robot_sim.hallway import PERSON_RADIUS, DriveResult, HallwayScene, drive
@@ -41,17 +41,14 @@ class HallwayDriver:
                             goal_tolerance=scene.goal_tolerance, robot_radius=scene.robot_radius)
         self.person.reset(self.view)
         self.follower = PathFollower(scene.path, lookahead=CARROT)
-        self.seen = PathFollower(scene.path, lookahead=HALLWAY_SAFETY["lookahead"])
+        self.seen = TaskBuilder(scene.path, lookahead=HALLWAY_SAFETY["lookahead"])
         self.tasks: List = []
         return self
 
     def __call__(self, state, t: float, observation) -> np.ndarray:
         carrot = self.follower.update(state[:2])
-        waypoint = self.seen.update(state[:2], in_sight(state, observation.angles,
-                                                        observation.ranges))
-        self.tasks.append(task_from_view(waypoint, self.scene.goal, state, observation.angles,
-                                         observation.ranges, observation.people,
-                                         observation.velocities, t))
+        self.tasks.append(self.seen(state, t, observation.angles, observation.ranges,
+                                    observation.people, observation.velocities))
         threat, velocity, radius = self._threat(state, self.tasks[-1], carrot)
         self.person.scenario = replace(
             self.view, goal=carrot,
