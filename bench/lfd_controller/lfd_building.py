@@ -13,7 +13,7 @@ feature set, the controller settings (hallway.HALLWAY_DRIVING) and the baselines
 fixed without F's drives):
   * a new person of F gives demonstrations on training-floor scenes (only successful takes);
     the reward is learned (hallway.fit_hallway_reward), its pace set to the person's
-    (calibrate_pace) and checked with the controller in the loop on two of the demonstrated
+    (calibrate_pace), the barrier margin to the person's room (room_margin) and checked with the controller in the loop on two of the demonstrated
     scenes (hallway_acceptance: refused only for failing where the person succeeded; a refused
     reward scores 0 %);
   * on test-floor scenes the person drives, the learned controller drives with the node's 0.1 s
@@ -49,6 +49,7 @@ from lfd_controller.hallway import (  # noqa: E402
     fit_hallway_reward,
     hallway_acceptance,
     hallway_windows,
+    room_margin,
 )
 from lfd_controller.hallway_baselines import SamplingController, SocialForceController, tune  # noqa: E402
 from lfd_controller.sim import FAMILIES  # noqa: E402
@@ -99,8 +100,9 @@ def drive_cloning(scene, policy):
     return drive_figures(drive(scene, view_policy(policy.predict, scene)))
 
 
-def drive_learner(scene, reward, budget=0.1):
-    controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=budget)
+def drive_learner(scene, reward, budget=0.1, margin=HALLWAY_SAFETY["barrier_margin"]):
+    controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=budget,
+                                   safety=dict(HALLWAY_SAFETY, barrier_margin=margin))
     cycles = []
 
     def policy(state, t, seen):
@@ -150,8 +152,9 @@ def family_row(family, train_grid, tests, sf, dwa, validation, demos_wanted):
     started = time.process_time()
     reward, _ = fit_hallway_reward(windows)
     reward = calibrate_pace(reward, float(np.median(speeds)))
+    margin = room_margin([d["closest"] for d in person_demo])
     learn_cpu = time.process_time() - started
-    check = [drive_learner(s, reward, budget=None) for s in demo_scenes[:2]]
+    check = [drive_learner(s, reward, budget=None, margin=margin) for s in demo_scenes[:2]]
     verdict = hallway_acceptance(person_demo[:2], check)
     cloning, best = None, -np.inf
     for hidden in BC_GRID["hidden"]:
@@ -166,7 +169,7 @@ def family_row(family, train_grid, tests, sf, dwa, validation, demos_wanted):
             row = {"floor": floor, "scene": scene.name, "people": len(scene.people),
                    "length": round(scene.length, 1)}
             row["person"] = drive_figures(hallway_demonstration(person, scene)[0])
-            row["learned"] = drive_learner(scene, reward)
+            row["learned"] = drive_learner(scene, reward, margin=margin)
             row["cloning"] = drive_cloning(scene, cloning)
             row["social_force"] = drive_baseline(scene, sf)
             row["sampling"] = drive_baseline(scene, dwa)
@@ -175,7 +178,7 @@ def family_row(family, train_grid, tests, sf, dwa, validation, demos_wanted):
                   + " ".join(f"{k}={row[k]['success']}/{row[k]['collision']}/{row[k]['time']:.0f}"
                              for k in ("person", "learned", "cloning", "social_force", "sampling")),
                   flush=True)
-    return {"family": family, "demos": len(demo_scenes), "windows": len(windows),
+    return {"family": family, "demos": len(demo_scenes), "windows": len(windows), "margin": margin,
             "learn_cpu_s": learn_cpu, "acceptance": verdict,
             "weights": dict(zip(reward.features.names, map(float, reward.weights))), "rows": rows}
 

@@ -34,7 +34,7 @@ from lfd_controller.planner import RecedingHorizonController
 from lfd_controller.rewards import RewardDerivatives
 from robot_common.tasks import ObstacleMotion, Scenario
 
-__all__ = ["HALLWAY_DRIVING", "HALLWAY_SAFETY", "TaskBuilder", "HallwayBarrier", "HallwayController",
+__all__ = ["HALLWAY_DRIVING", "HALLWAY_SAFETY", "room_margin", "TaskBuilder", "HallwayBarrier", "HallwayController",
            "HallwayDemonstration",
            "HallwayCIOC", "hallway_scenario", "fit_hallway_reward", "hallway_windows",
            "task_from_view"]
@@ -54,6 +54,9 @@ HALLWAY_DRIVING = {"horizon": 12, "plan_dt": 0.4, "terminal": 0.0, "spread_seeds
 HALLWAY_SAFETY = {"robot_radius": 0.18, "person_radius": 0.25, "barrier_margin": 0.1,
                   "stop_margin": 0.05, "blocked_after": 20.0, "lookahead": 4.0}
 WINDOW, STRIDE = 40, 20
+# Share of the cycle budget the planner may use (the rest: the task from the scan and people,
+# and headroom for a busy machine).
+PLANNING_SHARE = 0.7
 
 
 def hallway_scenario(dt: float = 0.1, name: str = "hallway") -> Scenario:
@@ -150,7 +153,8 @@ class HallwayController:
         planned = HallwayBarrier(self.reward, robot_radius=self.safety["robot_radius"],
                                  person_radius=self.safety["person_radius"],
                                  margin=self.safety["barrier_margin"])
-        self.planner = RecedingHorizonController(planned, self.model, budget=self.budget,
+        budget = None if self.budget is None else PLANNING_SHARE * self.budget
+        self.planner = RecedingHorizonController(planned, self.model, budget=budget,
                                                  **self.settings)
         self.status_, self.held_since_ = "following", None
 
@@ -266,6 +270,14 @@ def calibrate_pace(reward, person_speed: float):
     for name in ("speed_squared", "speed_effort"):
         weights[reward.features.names.index(name)] *= wanted / squared
     return type(reward)(weights, reward.features)
+
+
+def room_margin(closest: Sequence[float], *, least: float = 0.1) -> float:
+    """The barrier margin (m beyond touching) that keeps a person's room: their median closest
+    approach to people over their demonstrations less 0.05 m, at least `least` (the one-obstacle
+    calibration's rule, acceptance.calibrate)."""
+    finite = [c for c in closest if np.isfinite(c)]
+    return float(max(least, np.median(finite) - 0.05)) if finite else least
 
 
 def hallway_acceptance(person: Sequence[Dict], controller: Sequence[Dict]) -> Dict:
