@@ -43,6 +43,18 @@ PREDICTED_FEATURE = "obstacle_predicted"
 STATE_EFFORT_FEATURES = ("speed_squared", "turn_squared")
 
 
+def as_trajectory(states, actions, times):
+    """(states (T, 5), actions (T, 2), times (T,)) as float arrays; LfdError when their lengths
+    differ."""
+    states = np.atleast_2d(np.asarray(states, float))
+    actions = np.atleast_2d(np.asarray(actions, float))
+    times = np.atleast_1d(np.asarray(times, float))
+    if not (len(states) == len(actions) == len(times)):
+        raise LfdError(f"states, actions and times differ in length: {len(states)}, "
+                       f"{len(actions)}, {len(times)}")
+    return states, actions, times
+
+
 def proximity_name(width: float) -> str:
     """Name of the extra proximity feature of fall-off length `width` (m)."""
     return f"obstacle_proximity_{width:g}"
@@ -221,12 +233,7 @@ class FeatureSet:
 
     def evaluate(self, states, actions, times, task: Task, *, order: int = 2) -> FeatureValues:
         """Features of states (T, 5) and actions (T, 2) at episode times (T,)."""
-        states = np.atleast_2d(np.asarray(states, float))
-        actions = np.atleast_2d(np.asarray(actions, float))
-        times = np.atleast_1d(np.asarray(times, float))
-        if not (len(states) == len(actions) == len(times)):
-            raise LfdError(f"states, actions and times differ in length: {len(states)}, "
-                           f"{len(actions)}, {len(times)}")
+        states, actions, times = as_trajectory(states, actions, times)
         count = len(states)
         ahead = None
         if self.predicted:

@@ -26,7 +26,7 @@ from typing import Callable, Dict, Optional
 import numpy as np
 
 from lfd_controller.errors import LfdError
-from lfd_controller.features import FeatureValues
+from lfd_controller.features import FeatureValues, as_trajectory
 from lfd_controller.jets import Jet
 
 __all__ = ["HALLWAY_STATE_FEATURES", "HALLWAY_SIGNS", "HallwayTask", "HallwayFeatures",
@@ -240,12 +240,7 @@ class HallwayFeatures:
 
     def evaluate(self, states, actions, times, task: HallwayTask, *, order: int = 2
                  ) -> FeatureValues:
-        states = np.atleast_2d(np.asarray(states, float))
-        actions = np.atleast_2d(np.asarray(actions, float))
-        times = np.atleast_1d(np.asarray(times, float))
-        if not (len(states) == len(actions) == len(times)):
-            raise LfdError(f"states, actions and times differ in length: {len(states)}, "
-                           f"{len(actions)}, {len(times)}")
+        states, actions, times = as_trajectory(states, actions, times)
         jets = self._state_jets(states, times, task, hessian=order >= 2)
         count = len(states)
         control_jac = np.zeros((count, 2, 2))
