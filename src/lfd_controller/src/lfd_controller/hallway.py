@@ -241,6 +241,15 @@ class HallwayCIOC(LinearCIOC):
         kwargs.setdefault("second_order", False)
         super().__init__(HallwayFeatures(), **kwargs)
 
+    def initial_weights(self) -> np.ndarray:
+        """LinearCIOC's start (effort -1) with the state weights' jitter 100 times smaller: sums
+        over many close scan points have large Hessians, and a jitter of 0.01 can already make
+        the start's Hessian indefinite."""
+        weights = super().initial_weights()
+        states = len(self.features.state_names)
+        weights[:states] *= 0.01
+        return weights
+
     def _terms(self, demos):
         from lfd_controller.cioc import feature_terms
         return [feature_terms(DemoDynamics(d.scenario.model(), d.start, d.actions, d.t0, d.task),
