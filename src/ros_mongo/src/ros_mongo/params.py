@@ -21,6 +21,7 @@ from ros_mongo.urls import redact_url, with_credentials
 if TYPE_CHECKING:  # the spool and the changes follower load only when a node asks for them
     from ros_mongo.fleet.changes import ChangesFollower
     from ros_mongo.recording.bounded_spool import DropPolicy
+    from ros_mongo.recording.upload_rules import UploadRules
 
 __all__ = ["RecorderParams", "RetrieverParams", "ReplicatorParams", "CentralSourceParams", "SOURCES",
            "ORIGINAL_TOPICS", "ORIGINAL_TAGS", "configured_query", "compile_patterns"]
@@ -98,6 +99,12 @@ class RecorderParams(NodeConfig):
     chunk_rate: float = param(0.0, "also chunk every topic once it receives this many messages within "
                                    "one second (0.0: by chunk_topics only)")
     chunk_messages: int = param(1000, "messages per chunk, at most")
+    upload_rules: str = param("", "a YAML file of per-topic upload rules (live, when: kept on the robot "
+                                  "until docked / a daily window, local: never sent); empty: every "
+                                  "topic live. For a recorder writing to central (fleet.launch)")
+    ledger_period: float = param(5.0, "seconds between saves of the upload ledger "
+                                      "(<spool_path>.ledger) and its values on /diagnostics",
+                                 minimum=0.1)
     db_timeout: float = param(5.0, "seconds a database request may take")
     diagnostics_period: float = param(1.0, "seconds between /diagnostics messages")
     log_period: float = param(10.0, "seconds between count lines in the log (when they changed)")
@@ -109,6 +116,7 @@ class RecorderParams(NodeConfig):
         compile_patterns("spool_drop_topics", self.spool_drop_topics)
         self.decode_policy()
         self.chunk_policy()
+        self.upload_policy()
         if self.spool_max_mb <= 0 or self.spool_min_free_mb < 0:
             raise ConfigError(f"~spool_max_mb must be positive and ~spool_min_free_mb not negative, got "
                               f"{self.spool_max_mb!r} and {self.spool_min_free_mb!r}")
@@ -131,6 +139,11 @@ class RecorderParams(NodeConfig):
             return ChunkPolicy(self.chunk_topics, self.chunk_rate, self.chunk_messages)
         except ValueError as err:
             raise ConfigError(f"~chunk_rate / ~chunk_messages: {err}") from None
+
+    def upload_policy(self) -> "UploadRules":
+        """The upload rules of ~upload_rules (ConfigError naming a bad file or value)."""
+        from ros_mongo.recording.upload_rules import load_upload_rules
+        return load_upload_rules(self.upload_rules)
 
     def drop_policy(self) -> "DropPolicy":
         """Which topics lose their oldest messages first when the spool is full."""

@@ -127,6 +127,15 @@ class BoundedSpool:
         """Bytes on disk in all files."""
         return self.kept.size + sum(s.size for _, s in self.segments)
 
+    def pending_topics(self) -> Dict[str, int]:
+        """Messages not yet drained per topic, in all files (read from the frames' headers)."""
+        counts: Dict[str, int] = {}
+        with self._lock:
+            for spool in [self.kept] + [s for _, s in self.segments]:
+                for topic, count in spool.pending_topics().items():
+                    counts[topic] = counts.get(topic, 0) + count
+        return counts
+
     def dropped_total(self) -> int:
         with self._lock:
             return sum(self.dropped.values())

@@ -40,6 +40,7 @@ from ros_mongo.errors import DocumentsRejected, SpoolError, StoreError
 from ros_mongo.messages.decoding import DecodePolicy
 from ros_mongo.recording.bounded_spool import BoundedSpool
 from ros_mongo.recording.chunker import Chunker, ChunkPolicy, PendingChunk
+from ros_mongo.recording.deferral import Deferral, DeferredPart
 from ros_mongo.recording.quarantine import Quarantine
 from ros_mongo.recording.record_builder import Key as _Key
 from ros_mongo.recording.record_builder import RecordBuilder
@@ -54,7 +55,10 @@ log = logging.getLogger(__name__)
 #: Bytes a queued message costs beyond its payload (the bytes object, the queue entry, its tuple
 #: and numbers, measured with sys.getsizeof on CPython 3.8-3.11).
 ITEM_OVERHEAD = 200
-COUNTERS = ("received", "stored", "dropped", "rejected", "quarantined", "spooled", "writer_restarts")
+COUNTERS = ("received", "stored", "dropped", "rejected", "quarantined", "spooled", "writer_restarts",
+            "deferred", "released")
+#: Bytes of a deferred part read per write while releasing it (small: live batches go between).
+RELEASE_BYTES = 4 * 1024 * 1024
 
 
 class Recorder:
@@ -75,6 +79,9 @@ class Recorder:
             (ros_mongo.messages.decoding; default: everything).
         chunks: which topics are stored as chunks (ros_mongo.storage.chunks; default: none), for stores
             that take them (CouchDB).
+        deferral: the deferred parts of the spool (ros_mongo.recording.deferral; default: none):
+            their topics go to their part at once and are written only while its condition holds,
+            a batch at a time while fewer than a batch of live messages wait (live first).
     """
 
     def __init__(self, store: MessageStore, spool: BoundedSpool, *, batch_size: int = 500,
@@ -82,13 +89,15 @@ class Recorder:
                  writers: int = 2, session_id: Optional[str] = None, robot_id: Optional[str] = None,
                  tags: Sequence[str] = (), topic_tags: Optional[Dict[str, Sequence[str]]] = None,
                  quarantine_path: Optional[str] = None, author: Optional[str] = None,
-                 decode: Optional[DecodePolicy] = None, chunks: Optional[ChunkPolicy] = None):
+                 decode: Optional[DecodePolicy] = None, chunks: Optional[ChunkPolicy] = None,
+                 deferral: Optional[Deferral] = None):
         if batch_size < 1 or batch_period <= 0 or max_queue_bytes < 1 or retry_period <= 0 or writers < 1:
             raise ValueError(f"batch_size, batch_period, max_queue_bytes, retry_period and writers must "
                              f"be positive, got {batch_size!r}, {batch_period!r}, {max_queue_bytes!r}, "
                              f"{retry_period!r}, {writers!r}")
         self.writers = int(writers)
-        self.store, self.spool = store, spool
+        self.store, self.spool, self.deferral = store, spool, deferral
+        self.uploaded: Dict[str, int] = {}  # messages stored per topic (this process)
         self.quarantine = Quarantine(quarantine_path or str(spool.path) + ".quarantine",
                                      min_free_bytes=0)
         self.batch_size, self.batch_period = int(batch_size), float(batch_period)
@@ -113,6 +122,7 @@ class Recorder:
         self._count_lock = threading.Lock()
         self._spill_lock = threading.Lock()
         self._dropped_topics: Dict[str, int] = {}
+        self._drop_reasons: Dict[str, str] = {}  # the latest reason per topic
         self._order = threading.Condition()
         self._tickets = 0       # batches taken
         self._turn = 0          # the batch whose turn it is to be written
@@ -127,6 +137,7 @@ class Recorder:
         """Enqueue one serialized message (or spool it when the queue is full); False if dropped."""
         key = (topic, msg_type, md5sum, callerid)
         cost = len(raw) + ITEM_OVERHEAD
+        part = self.deferral.part_for(topic) if self.deferral is not None else None
         with self._cond:
             self._counts["received"] += 1      # one key, only ever written under _cond
             if key not in self._topics:
@@ -134,7 +145,7 @@ class Recorder:
                                  self.records.robot_id or "")
                 self._topics[key] = info
                 self._queue.append((info,))
-            if self._queued_bytes + cost <= self.max_queue_bytes:
+            if part is None and self._queued_bytes + cost <= self.max_queue_bytes:
                 self._queued_bytes += cost
                 self._queued_messages += 1
                 stamp = receive.secs + receive.nsecs * 1e-9
@@ -146,7 +157,21 @@ class Recorder:
                 if len(self._queue) >= self.batch_size:
                     self._cond.notify()
                 return True
+        if part is not None:
+            return self._defer(part, key, raw, receive)
         return self._spill(key, raw, receive)
+
+    def _defer(self, part: DeferredPart, key: _Key, raw: bytes, receive: genpy.Time) -> bool:
+        """Into its deferred part, undecoded (decoded when released)."""
+        record = self.records.raw(key, raw, receive.secs, receive.nsecs)
+        with part.lock:
+            try:
+                part.spool.append([record], self._topics)
+            except SpoolError as err:
+                self._drop({key[0]: 1}, f"its part {part.rule.name!r} of the spool is full: {err}")
+                return False
+        self._add("deferred", 1)
+        return True
 
     def _spill(self, key: _Key, raw: bytes, receive: genpy.Time) -> bool:
         """Straight to the spool, undecoded (the fields are decoded when it is drained)."""
@@ -169,21 +194,40 @@ class Recorder:
         counts["dropped"] += self.spool.dropped_total()
         counts.update(spool_pending=self.spool.pending_records, queued=self._queued_messages,
                       queued_bytes=self._queued_bytes)
+        if self.deferral is not None:
+            counts["dropped"] += sum(self.deferral.dropped().values())
+            counts["deferred_pending"] = self.deferral.pending_records()
         return counts
 
     def dropped_by_topic(self) -> Dict[str, int]:
         """Messages dropped per topic (memory and spool exhausted, or the spool's policy)."""
         with self._count_lock:
             dropped = dict(self._dropped_topics)
-        for topic, count in dict(self.spool.dropped).items():
-            dropped[topic] = dropped.get(topic, 0) + count
+        policy_drops = [self.spool.dropped] + ([self.deferral.dropped()] if self.deferral else [])
+        for counts in policy_drops:
+            for topic, count in dict(counts).items():
+                dropped[topic] = dropped.get(topic, 0) + count
         return dropped
+
+    def drop_reasons(self) -> Dict[str, str]:
+        """The latest reason per topic that lost messages."""
+        with self._count_lock:
+            reasons = dict(self._drop_reasons)
+        for topic in self.dropped_by_topic():
+            reasons.setdefault(topic, "spool full: the oldest messages of droppable topics go first")
+        return reasons
+
+    def uploaded_by_topic(self) -> Dict[str, int]:
+        """Messages stored in the database per topic (this process)."""
+        with self._count_lock:
+            return dict(self.uploaded)
 
     def _drop(self, per_topic: Dict[str, int], why: str) -> None:
         with self._count_lock:
             for topic, count in per_topic.items():
                 self._counts["dropped"] += count
                 self._dropped_topics[topic] = self._dropped_topics.get(topic, 0) + count
+                self._drop_reasons[topic] = why
         total = sum(per_topic.values())
         self._set_fault(f"dropped {total} messages ({why})")
         log.error("dropped %d messages %s: %s", total, per_topic, why)
@@ -241,6 +285,7 @@ class Recorder:
                 thread.join(max(0.0, self._deadline - time.monotonic()))
             while self.spool.pending and self.db_ok and time.monotonic() < self._deadline:
                 self._drain_once()
+            self._release()
 
     def _take(self) -> Tuple[List[tuple], Optional[int]]:
         with self._cond:
@@ -362,10 +407,20 @@ class Recorder:
             if len(refused) != err.rejected:  # the server did not name them all: one at a time
                 refused = [r for r in records if not self._insert_alone(r)]
             self._quarantine(refused, err)
-            self._add("stored", sum(map(message_count, records)) - sum(map(message_count, refused)))
+            self._count_stored(records, refused)
             return
         # counted once: a failed attempt that reached the database anyway was not counted
-        self._add("stored", sum(map(message_count, records)))
+        self._count_stored(records, ())
+
+    def _count_stored(self, records: list, refused: list) -> None:
+        skip = {id(r) for r in refused}
+        with self._count_lock:
+            for record in records:
+                if id(record) not in skip:
+                    count = message_count(record)
+                    topic = record.records[0].topic if isinstance(record, ChunkRecord) else record.topic
+                    self._counts["stored"] += count
+                    self.uploaded[topic] = self.uploaded.get(topic, 0) + count
 
     def _insert_alone(self, record: MessageRecord) -> bool:
         try:
@@ -422,21 +477,37 @@ class Recorder:
             log.info("database answers again; draining %d spooled messages", self.spool.pending_records)
         while self.spool.pending and self.db_ok and time.monotonic() < self._deadline:
             self._drain_once()
+        self._release()
 
-    def _drain_once(self) -> None:
-        entries, token = self.spool.read(max_entries=self.batch_size, max_bytes=32 * 1024 * 1024)
+    def _release(self) -> None:
+        """Write deferred parts whose condition holds, a batch at a time while fewer than a batch
+        of live messages wait (the kept spool first: it holds live topics)."""
+        if self.deferral is None or self.spool.pending:
+            return
+        for part in self.deferral.releasable():
+            while (part.spool.pending and self.db_ok and len(self._queue) < self.batch_size
+                   and time.monotonic() < self._deadline):
+                self._add("released", self._drain_once(part.spool, RELEASE_BYTES))
+            if len(self._queue) >= self.batch_size:
+                return
+
+    def _drain_once(self, spool: Optional[BoundedSpool] = None, max_bytes: int = 32 * 1024 * 1024) -> int:
+        """Write the next entries of `spool` (default: the recorder's); the messages written."""
+        spool = spool or self.spool
+        entries, token = spool.read(max_entries=self.batch_size, max_bytes=max_bytes)
         records = sum(message_count(e) for e in entries)
         self.records.complete(entries)
         try:
             self._store(entries)
         except StoreError as err:  # never skipped: the entries stay in the spool
-            self.spool.release()
+            spool.release()
             self._went_down(err)
-            return
+            return 0
         self._clear_fault()
-        self.spool.commit(token, records)
-        if not self.spool.pending:
-            log.info("spool drained")
+        spool.commit(token, records)
+        if not spool.pending:
+            log.info("spool %s drained", spool.path)
+        return records
 
 
 def _messages(item) -> int:

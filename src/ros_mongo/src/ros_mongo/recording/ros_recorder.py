@@ -13,9 +13,13 @@ from std_msgs.msg import Header
 
 from robot_common.ros_node import ros_home
 from ros_mongo.compat.legacy import legacy_config
+from ros_mongo.errors import SpoolError
 from ros_mongo.params import ORIGINAL_TOPICS, RecorderParams, compile_patterns
 from ros_mongo.recording.bounded_spool import BoundedSpool
+from ros_mongo.recording.deferral import Deferral
+from ros_mongo.recording.ledger import Ledger
 from ros_mongo.recording.recorder import Recorder
+from ros_mongo.recording.upload_rules import docked_from_battery
 from ros_mongo.storage.store import open_store
 
 __all__ = ["RecorderNode", "ORIGINAL_TOPICS", "start"]
@@ -36,7 +40,13 @@ class RecorderNode:
         quarantined, spooled, spool_pending, spool_mb, queued, queued_bytes, writer_restarts, fault,
         last_fault, session_id, robot_id, spool_policy, the count received per topic
         ("topic <name>") and the count dropped per topic ("dropped <name>", only where any).
-    The summary logged at shutdown has the same counts, dropped ones per topic.
+        With ~upload_rules also deferred, released, deferred_pending, "rule <name>" (holding
+        or releasing, and its condition), and from the ledger per topic "ledger <topic>"
+        (recorded, uploaded, waiting, dropped, and the latest drop reason).
+    Subscribes also: the dock topics of the upload rules (std_msgs/Bool or
+        sensor_msgs/BatteryState, read by their type).
+    The summary logged at shutdown has the same counts, dropped ones per topic. The ledger is
+    saved to <spool_path>.ledger every ~ledger_period and at shutdown (`ros_mongo_bag ledger`).
     """
 
     def __init__(self, config: RecorderParams):
@@ -47,8 +57,14 @@ class RecorderNode:
         node = rospy.get_name().strip("/").replace("/", "_")
         self.session_id = config.session_id or time.strftime("%Y%m%dT%H%M%S") + f"-{node}"
         self.robot_id = config.robot_id or socket.gethostname()
+        self.rules = config.upload_policy()  # a bad rules file stops the node before recording
         self.store = open_store(config.db_url, connect=False, **config.store_options())
         spool_path = config.spool_path or str(ros_home() / "ros_mongo" / f"{node}.spool")
+        deferral = Deferral(self.rules, spool_path, policy=config.drop_policy(), fsync=config.spool_fsync,
+                            min_free_bytes=int(config.spool_min_free_mb * 2 ** 20)).open() \
+            if self.rules.deferred else None
+        self.ledger = Ledger(spool_path + ".ledger").load()
+        self.ledger_values: list = []
         spool = BoundedSpool(spool_path, fsync=config.spool_fsync,
                              max_bytes=int(config.spool_max_mb * 2 ** 20),
                              min_free_bytes=int(config.spool_min_free_mb * 2 ** 20),
@@ -59,7 +75,7 @@ class RecorderNode:
             retry_period=config.retry_period, writers=config.writers, session_id=self.session_id,
             robot_id=self.robot_id, tags=config.tags, topic_tags=config.topic_tags,
             quarantine_path=config.quarantine_path or None, author=config.author,
-            decode=config.decode_policy(), chunks=config.chunk_policy())
+            decode=config.decode_policy(), chunks=config.chunk_policy(), deferral=deferral)
         self.subscribers: Dict[str, rospy.Subscriber] = {}
         self.topic_counts: Dict[str, int] = {}
         self._last_log: Optional[Dict[str, int]] = None
@@ -74,6 +90,9 @@ class RecorderNode:
             rospy.Timer(rospy.Duration(self.config.discovery_period), self._discover)
         rospy.Timer(rospy.Duration(self.config.diagnostics_period), self._publish_diagnostics)
         rospy.Timer(rospy.Duration(self.config.log_period), self._log_counts)
+        rospy.Timer(rospy.Duration(self.config.ledger_period), self._save_ledger)
+        self.dock_subscribers = [rospy.Subscriber(topic, rospy.AnyMsg, self._dock, callback_args=topic)
+                                 for topic in self.rules.dock_topics]
         rospy.loginfo("recording %s into %s (session %s, robot %s, spool %s of at most %.0f MB; when it "
                       "is full the oldest messages of %s go first)", sorted(self.subscribers),
                       self.store.url, self.session_id, self.robot_id, self.recorder.spool.path,
@@ -82,6 +101,8 @@ class RecorderNode:
 
     def _subscribe(self, topic: str) -> None:
         if topic in self.subscribers or topic in self.skip or any(p.search(topic) for p in self.exclude):
+            return
+        if self.rules.mode(topic) == "local":  # never leaves the robot: not sent to central
             return
         self.topic_counts[topic] = 0
         # rospy's default 64 KB receive buffer: a larger one is allocated for every socket read
@@ -99,6 +120,41 @@ class RecorderNode:
                                  header.get("message_definition", ""), header.get("latching") == "1",
                                  header.get("callerid", "")):
             self.topic_counts[topic] += 1
+
+    def _dock(self, msg: rospy.AnyMsg, topic: str) -> None:
+        """A dock topic's state: std_msgs/Bool data, or sensor_msgs/BatteryState charging / full."""
+        msg_type = msg._connection_header["type"]
+        if msg_type == "std_msgs/Bool":
+            from std_msgs.msg import Bool
+            docked = Bool().deserialize(msg._buff).data
+        elif msg_type == "sensor_msgs/BatteryState":
+            from sensor_msgs.msg import BatteryState
+            docked = docked_from_battery(BatteryState().deserialize(msg._buff).power_supply_status)
+        else:
+            rospy.logerr_throttle(30, f"dock topic {topic} has type {msg_type}: expected std_msgs/Bool "
+                                      f"or sensor_msgs/BatteryState (taken as not docked)")
+            docked = False
+        self.recorder.deferral.set_docked(topic, docked)
+
+    def _ledger_now(self) -> dict:
+        recorder = self.recorder
+        counts = {"recorded": dict(self.topic_counts), "uploaded": recorder.uploaded_by_topic(),
+                  "dropped": recorder.dropped_by_topic()}
+        waiting = recorder.spool.pending_topics() if recorder.spool.pending else {}
+        if recorder.deferral is not None:
+            for topic, count in recorder.deferral.pending_by_topic().items():
+                waiting[topic] = waiting.get(topic, 0) + count
+        return self.ledger.combine(counts, waiting, recorder.drop_reasons())
+
+    def _save_ledger(self, _event) -> None:
+        try:
+            ledger = self._ledger_now()
+            self.ledger.save(ledger)
+        except SpoolError as err:
+            rospy.logerr_throttle(60, str(err))
+            return
+        self.ledger_values = [KeyValue(f"ledger {topic}", ", ".join(f"{k} {v}" for k, v in row.items()))
+                              for topic, row in ledger.items()]
 
     def _discover(self, _event) -> None:
         try:
@@ -129,6 +185,12 @@ class RecorderNode:
         status.values += [KeyValue(f"topic {t}", str(n)) for t, n in sorted(self.topic_counts.items())]
         status.values += [KeyValue(f"dropped {t}", str(n))
                           for t, n in sorted(self.recorder.dropped_by_topic().items())]
+        deferral = self.recorder.deferral
+        if deferral is not None:
+            status.values += [KeyValue(f"rule {name}", ("releasing" if deferral.holds(part) else "holding")
+                                       + f" (uploads when {part.rule.condition.describe()})")
+                              for name, part in deferral.parts.items()]
+        status.values += self.ledger_values
         self.diagnostics.publish(DiagnosticArray(header=Header(stamp=rospy.Time.now()), status=[status]))
 
     def _log_counts(self, _event) -> None:
@@ -138,10 +200,13 @@ class RecorderNode:
             self._last_log = counts
 
     def shutdown(self) -> None:
-        for subscriber in self.subscribers.values():
+        for subscriber in list(self.subscribers.values()) + getattr(self, "dock_subscribers", []):
             subscriber.unregister()
         counts = self.recorder.stop(self.config.shutdown_timeout)
+        self._save_ledger(None)
         self.recorder.spool.close()
+        if self.recorder.deferral is not None:
+            self.recorder.deferral.close()
         self.store.close()
         rospy.loginfo("recorder stopped: %s", ", ".join(f"{k} {v}" for k, v in counts.items()))
         dropped = self.recorder.dropped_by_topic()

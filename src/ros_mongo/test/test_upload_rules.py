@@ -1,0 +1,179 @@
+"""Upload rules of a fleet robot: the rules file (first match wins, a default, clear errors quoting
+the bad value), the conditions (dock state, daily windows), and the recorder core holding deferred
+topics on the robot's disk until the condition holds, through a recorder restart, on a real
+CouchDB-API server (pouchdb-server and the real Apache CouchDB)."""
+import datetime
+
+import genpy
+import pytest
+from nav_msgs.msg import Odometry
+from ros_mongo_samples import serialized
+from sensor_msgs.msg import Image
+
+from robot_common.errors import ConfigError
+from ros_harness import wait_until
+from ros_mongo import open_store
+from ros_mongo.params import RecorderParams
+from ros_mongo.recording.bounded_spool import BoundedSpool
+from ros_mongo.recording.deferral import Deferral
+from ros_mongo.recording.ledger import Ledger, format_ledger, read_ledger
+from ros_mongo.recording.recorder import Recorder
+from ros_mongo.recording.upload_rules import (
+    DailyWindow,
+    docked_from_battery,
+    load_upload_rules,
+    parse_upload_rules,
+)
+
+LONG = 120.0
+CAMERA = "/camera/rgb/image_raw"
+RULES = {"rules": [{"topics": "^/odom$", "upload": "live"},
+                   {"name": "camera", "topics": ["^/camera/", "^/depth"], "upload": "when",
+                    "when": {"docked": "/docked"}},
+                   {"topics": "^/debug/", "upload": "local"},
+                   {"topics": "^/debug/odom", "upload": "live"}],  # never reached: rule 3 first
+         "default": "live"}
+
+
+def at(clock):
+    hours, minutes = map(int, clock.split(":"))
+    return datetime.time(hours, minutes)
+
+
+def test_the_first_matching_rule_wins_and_unmatched_topics_get_the_default():
+    rules = parse_upload_rules(RULES)
+    assert [rules.mode(t) for t in ("/odom", CAMERA, "/depth/points", "/debug/odom", "/scan")] == \
+        ["live", "when", "when", "local", "live"]
+    assert rules.rule_for(CAMERA).name == "camera" and rules.rule_for("/odom").name == "rule1"
+    assert rules.dock_topics == ["/docked"]
+    assert parse_upload_rules({"rules": [], "default": "local"}).mode("/anything") == "local"
+
+
+def test_daily_windows_include_their_start_exclude_their_end_and_wrap_midnight():
+    night, day = DailyWindow("22:00-06:00"), DailyWindow("09:30 - 17:00")
+    assert [night.contains(at(t)) for t in ("22:00", "23:59", "00:00", "05:59", "06:00", "12:00")] == \
+        [True, True, True, True, False, False]
+    assert [day.contains(at(t)) for t in ("09:29", "09:30", "16:59", "17:00")] == [False, True, True, False]
+    assert DailyWindow("00:00-00:00").contains(at("13:13"))  # equal ends: the whole day
+
+
+def test_docked_means_a_true_bool_or_a_battery_charging_or_full():
+    # BatteryState: 0 unknown, 1 charging, 2 discharging, 3 not charging, 4 full
+    assert [docked_from_battery(s) for s in range(5)] == [False, True, False, False, True]
+    condition = parse_upload_rules({"rules": [{"topics": "x", "upload": "when",
+                                               "when": {"docked": "/dock", "window": "22:00-06:00"}}]}
+                                   ).rules[0].condition
+    assert not condition.holds({}, at("23:00"))                  # dock state unknown: not docked
+    assert not condition.holds({"/dock": True}, at("12:00"))     # docked, outside the window
+    assert condition.holds({"/dock": True}, at("23:00"))
+
+
+@pytest.mark.parametrize("rules, match", [
+    ({"rules": [{"topics": "^/cam(", "upload": "live"}]}, r"rule 1: bad regular expression '\^/cam\('"),
+    ({"rules": [{"topics": "^/cam", "upload": "sometimes"}]}, r"rule 1: unknown upload mode 'sometimes'"),
+    ({"rules": [{"topics": "^/a", "upload": "live"}, {"upload": "live"}]}, r"rule 2: 'topics' must be"),
+    ({"rules": [{"topics": "^/a", "upload": "when"}]}, r"rule 1: upload: when needs 'when'"),
+    ({"rules": [{"topics": "a", "upload": "when", "when": {"window": "25:00-06:00"}}]},
+     r"bad window '25:00-06:00': '25:00' is not a time"),
+    ({"rules": [{"topics": "a", "upload": "when", "when": {"window": "22:00"}}]},
+     r"bad window '22:00': expected 'HH:MM-HH:MM'"),
+    ({"rules": [{"topics": "a", "upload": "when", "when": {"docked": "dock"}}]},
+     r"'docked' must be a topic name starting with '/', got 'dock'"),
+    ({"rules": [{"topics": "a", "upload": "when", "when": {"charging": "/b"}}]},
+     r"unknown conditions \['charging'\]"),
+    ({"rules": [{"topics": "a", "upload": "when", "when": {"docked": "/d"}, "max_mb": -1}]},
+     r"'max_mb' must be a positive number, got -1"),
+    ({"rules": [{"topics": "a", "upload": "live", "max_mb": 5}]}, r"belong to upload: when rules"),
+    ({"rules": [{"topics": "a", "upload": "live", "priority": 1}]}, r"unknown keys \['priority'\]"),
+    ({"rules": [{"name": "x", "topics": "a", "upload": "live"},
+                {"name": "x", "topics": "b", "upload": "local"}]}, r"repeated: \['x'\]"),
+    ({"rules": [], "default": "when"}, r"default must be live or local, got 'when'"),
+    ({"topics": "a"}, r"expected a mapping with 'rules'"),
+])
+def test_a_bad_rules_document_is_a_clear_error_quoting_the_bad_value(rules, match):
+    with pytest.raises(ConfigError, match=match):
+        parse_upload_rules(rules)
+
+
+def test_a_bad_rules_file_stops_the_recorder_before_it_records(tmp_path):
+    bad = tmp_path / "rules.yaml"
+    bad.write_text("rules: [{topics: '^/odom', upload: live}\n")  # unclosed
+    with pytest.raises(ConfigError, match=r"rules.yaml is not valid YAML"):
+        load_upload_rules(bad)
+    with pytest.raises(ConfigError, match=r"cannot read the upload rules file .*missing.yaml"):
+        RecorderParams.from_mapping({"upload_rules": str(tmp_path / "missing.yaml")})
+    bad.write_text("rules:\n  - {topics: '[', upload: live}\n")
+    with pytest.raises(ConfigError, match=r"rules.yaml: upload rules: rule 1: bad regular expression"):
+        RecorderParams.from_mapping({"upload_rules": str(bad)})
+
+
+def test_the_ledger_adds_each_run_to_the_last_and_survives_restarts(tmp_path):
+    ledger = Ledger(tmp_path / "s.ledger").load()
+    first = ledger.combine({"recorded": {"/odom": 10, CAMERA: 3}, "uploaded": {"/odom": 10}},
+                           {CAMERA: 3}, {})
+    ledger.save(first)
+    again = Ledger(tmp_path / "s.ledger").load()
+    second = again.combine({"recorded": {CAMERA: 2}, "uploaded": {CAMERA: 4}, "dropped": {CAMERA: 1}},
+                           {}, {CAMERA: "spool full"})
+    assert second == {"/odom": {"recorded": 10, "uploaded": 10, "dropped": 0, "waiting": 0},
+                      CAMERA: {"recorded": 5, "uploaded": 4, "dropped": 1, "waiting": 0,
+                               "reason": "spool full"}}
+    again.save(second)
+    assert read_ledger(tmp_path / "s.ledger") == second
+    assert "spool full" in format_ledger(second).splitlines()[1]  # the camera row (sorted first)
+
+
+class Robot:
+    """The recorder core with the camera deferred until docked, its spools in `work`."""
+
+    def __init__(self, store, work, rules):
+        self.spool = BoundedSpool(work / "r.spool", max_bytes=64 << 20, min_free_bytes=0).open()
+        self.deferral = Deferral(rules, str(work / "r.spool")).open()
+        self.recorder = Recorder(store, self.spool, batch_period=0.05, retry_period=0.2,
+                                 robot_id="r1", deferral=self.deferral).start()
+
+    def send(self, topic, cls, index):
+        msg = cls()
+        msg.header.frame_id = str(index)
+        if cls is Image:
+            msg.height, msg.width, msg.step, msg.encoding = 10, 100, 100, "mono8"
+            msg.data = bytes(1000)
+        stamp = genpy.Time(1000 + index, 0)
+        assert self.recorder.receive(topic, serialized(msg), stamp, cls._type, cls._md5sum,
+                                     cls._full_text)
+
+    def stop(self):
+        counts = self.recorder.stop(10.0)
+        self.spool.close()
+        self.deferral.close()
+        return counts
+
+
+def frame_ids(store, topic):
+    return sorted(int(m.fields["header"]["frame_id"]) for m in store.find_messages(topic=topic))
+
+
+def test_deferred_topics_wait_on_the_robot_until_docked_and_arrive_once_through_a_restart(
+        couchdb_url, tmp_path):
+    rules = parse_upload_rules(RULES)
+    with open_store(couchdb_url) as store:
+        robot = Robot(store, tmp_path, rules)
+        for index in range(20):
+            robot.send("/odom", Odometry, index)
+            if index % 2 == 0:
+                robot.send(CAMERA, Image, index)
+        wait_until(lambda: len(frame_ids(store, "/odom")) == 20, LONG, what="odometry live")
+        assert frame_ids(store, CAMERA) == []                       # the camera waits
+        assert robot.recorder.counts()["deferred_pending"] == 10
+        assert robot.deferral.pending_by_topic() == {CAMERA: 10}
+        assert robot.stop()["deferred"] == 10                       # kept on disk, not sent
+
+        robot = Robot(store, tmp_path, rules)                       # a restart while undocked
+        for index in range(20, 24, 2):
+            robot.send(CAMERA, Image, index)
+        robot.deferral.set_docked("/docked", True)                  # docking releases the camera
+        wait_until(lambda: len(frame_ids(store, CAMERA)) == 12, LONG, what="every image central")
+        counts = robot.stop()
+        assert frame_ids(store, CAMERA) == list(range(0, 24, 2))    # each image once
+        assert frame_ids(store, "/odom") == list(range(20))
+        assert counts["released"] == 12 and counts["deferred_pending"] == 0 and counts["dropped"] == 0
