@@ -8,6 +8,7 @@
     ros_mongo_bag setup --db-url http://admin@127.0.0.1:5984/robot_data --db-credentials-file ~/.admin
     ros_mongo_bag migrate --from-url mongodb://127.0.0.1:27017 --db-url mongodb://127.0.0.1:27017/test_database
     ros_mongo_bag convert --query "tags lidar"     (bag_converter.launch: the original's defaults)
+    ros_mongo_bag ledger ~/.ros/ros_mongo/ros_mongo_server.spool   (a fleet robot's upload ledger)
 
 Credentials: keep --db-url password-free (a password on the command line shows in `ps` and logs)
 and give it through --db-credentials-file (one line, 'user:password' or 'password') or the
@@ -41,6 +42,7 @@ from ros_mongo.files.bagio import BATCH_BYTES, export_file, import_file
 from ros_mongo.files.formats import format_names
 from ros_mongo.query import parse_query, query_from_mapping
 from ros_mongo.recording.allocator import keep_freed_memory
+from ros_mongo.recording.ledger import format_ledger, read_ledger
 from ros_mongo.storage.store import open_store
 from ros_mongo.urls import PASSWORD_ENV, password_warning, redact_url
 
@@ -109,6 +111,9 @@ def parse_args(argv: List[str]) -> argparse.Namespace:
     convert.add_argument("--force", action="store_true", help="export: overwrite an existing bag")
     commands.add_parser("info", help="stored topics and message counts")
     commands.add_parser("setup", help="create the indexes / design documents (admin account, once)")
+    ledger = commands.add_parser("ledger", help="a recorder's upload ledger per topic: recorded, "
+                                                "uploaded, dropped (with the reason), waiting")
+    ledger.add_argument("spool", help="the recorder's ~spool_path (its ledger is <spool>.ledger)")
     for sub in commands.choices.values():  # options work before or after the command
         sub.add_argument("--db-url", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
         sub.add_argument("--db-credentials-file", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
@@ -220,6 +225,9 @@ def run(args: argparse.Namespace) -> None:
                                hint=f"in a file given as --db-credentials-file or in ${PASSWORD_ENV}")
     if warning:  # once: opening the store does not repeat it
         print(f"WARNING: {warning}", file=sys.stderr)
+    if args.command == "ledger":  # a file on the robot: no database
+        print(format_ledger(read_ledger(args.spool + ".ledger")))
+        return
     if args.command == "convert":
         args = _convert_args(args)
     with open_store(args.db_url, credentials_file=args.db_credentials_file, **_tls(args)) as store:
@@ -263,7 +271,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     keep_freed_memory()  # image-sized buffers reuse memory instead of fresh pages (recording.allocator)
     try:
         run(args)
-    except StoreError as err:
+    except StoreError as err:  # SpoolError (the ledger) is one
         print(f"ERROR: {err}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:

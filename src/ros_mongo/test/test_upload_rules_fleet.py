@@ -1,0 +1,116 @@
+"""Upload rules as users run them: `launch/fleet.launch upload_rules:=FILE` (the direct default)
+on a robot's own roscore, recording into a central pouchdb-server. Odometry goes live, camera
+images wait on the robot until a real `rostopic pub` says it is docked (std_msgs/Bool); the
+recorder is restarted in the middle of the deferral; a local-only topic never reaches central.
+The ledger command reads what the recorder saved, and it equals central's counts.
+(The same core runs against the real Apache CouchDB in test_upload_rules.py.)"""
+import subprocess
+import sys
+
+import pytest
+import requests
+from fleet_helpers import FleetRobot, all_docs, messages
+
+from ros_harness import LaunchSet, ManagedProcess, PouchDBServer, RosCore, wait_until
+
+LONG = 300.0
+CAMERA = "/camera/rgb/image_raw"
+RULES = """\
+rules:
+  - topics: ^/odom$
+    upload: live
+  - name: camera
+    topics: ^/camera/
+    upload: when
+    when: {docked: /docked}
+  - topics: ^/chatter$
+    upload: local
+"""
+
+
+def central_topics(admin_url):
+    """Messages per topic in central (read as its admin)."""
+    try:
+        counts = {}
+        for doc in messages(all_docs(admin_url)):
+            counts[doc["topic"]] = counts.get(doc["topic"], 0) + 1
+        return counts
+    except (requests.RequestException, ValueError, KeyError):
+        return {}
+
+
+class RuledRobot(FleetRobot):
+    def __init__(self, work, central_url, rules_file, workspace_root):
+        self.robot_id, self.work = "robot1", work / "robot1"
+        self.core = RosCore(log_dir=self.work / "ros").start()
+        self.launches = LaunchSet(self.core, self.work / "launch")
+        self.spool = self.work / "recorder.spool"
+        self.args = dict(central_url=central_url, robot_id=self.robot_id, upload_rules=str(rules_file),
+                         topics=f"[/odom, {CAMERA}, /chatter]", spool_path=str(self.spool))
+        self.launch_file = str(workspace_root / "launch" / "fleet.launch")
+        self.bag_tool = str(workspace_root / "src" / "ros_mongo" / "scripts" / "ros_mongo_bag")
+        self.launch = self.launches(self.launch_file, **self.args)
+
+    def restart(self):
+        self.launches.stop(self.launch)
+        self.launch = self.launches(self.launch_file, **self.args)
+        self.launch.wait_for_subscribers(["/odom", CAMERA, "/docked"], timeout=LONG)
+
+    def rostopic_pub(self, *argv):
+        return ManagedProcess(["rostopic", "pub", *argv], name="rostopic pub",
+                              log_path=self.work / f"pub{argv[0].replace('/', '_')}.log",
+                              env=self.core.env()).start()
+
+    def ledger(self):
+        result = subprocess.run([sys.executable, self.bag_tool, "ledger", str(self.spool)],
+                                capture_output=True, text=True, env=self.core.env(), timeout=60)
+        assert result.returncode == 0, result.stderr
+        rows = [line.split() for line in result.stdout.splitlines()[1:]]
+        return {row[0]: [int(v) for v in row[1:5]] for row in rows}  # recorded uploaded dropped waiting
+
+
+@pytest.mark.ros
+@pytest.mark.db
+def test_fleet_launch_holds_images_until_docked_through_a_restart_and_keeps_local_topics(
+        tmp_path, workspace_root):
+    count, rate, hold = 120, 60.0, 60
+    central = PouchDBServer(tmp_path / "central").start()
+    admin_url = central.database_url("fleet")
+    assert requests.put(admin_url, timeout=30).status_code == 201
+    rules = tmp_path / "rules.yaml"
+    rules.write_text(RULES)
+    robot = RuledRobot(tmp_path, admin_url, rules, workspace_root)
+    chatter = docked = None
+    try:
+        robot.launch.wait_for_subscribers(["/odom", CAMERA, "/docked"], timeout=LONG)
+        chatter = robot.rostopic_pub("/chatter", "std_msgs/String", "data: local only", "-r", "5")
+        robot.publish(count, rate, hold_at=hold)
+        wait_until(lambda: central_topics(admin_url).get("/odom", 0) == hold, LONG,
+                   what=f"{hold} odometry messages central")
+        robot.restart()  # in the middle of the deferral: the images wait in the robot's spool
+        robot.go_file.touch()
+        wait_until(lambda: central_topics(admin_url).get("/odom", 0) == count, LONG,
+                   what="every odometry message central")
+        wait_until(lambda: not robot.publisher.alive, LONG, what="everything published")
+        assert robot.published() == {"/odom": count, CAMERA: count // 10}
+        assert central_topics(admin_url) == {"/odom": count}   # no image, no /chatter yet
+        # the ledger is saved every ~ledger_period (5 s): the images wait on the robot
+        wait_until(lambda: robot.ledger().get(CAMERA, [0, 0, 0, 0])[3] == count // 10, LONG,
+                   what="the ledger shows every image waiting")
+
+        docked = robot.rostopic_pub("/docked", "std_msgs/Bool", "data: true", "-r", "2")
+        wait_until(lambda: central_topics(admin_url).get(CAMERA, 0) == count // 10, LONG,
+                   what="every image central after docking")
+        docs = messages(all_docs(admin_url))
+        ids = [(d["topic"], int(d["msg"]["header"]["frame_id"])) for d in docs]
+        assert len(ids) == len(set(ids)) == count + count // 10        # each message once
+        assert {i for t, i in ids if t == CAMERA} == set(range(0, count, 10))
+        assert "/chatter" not in {d["topic"] for d in docs}           # local never leaves
+        want = {"/odom": [count, count, 0, 0], CAMERA: [count // 10, count // 10, 0, 0]}
+        wait_until(lambda: robot.ledger() == want, LONG, what=f"the ledger equal to central: {want}")
+    finally:
+        for process in (chatter, docked):
+            if process is not None:
+                process.stop()
+        robot.close()
+        central.stop()
