@@ -3,6 +3,7 @@ the bad value), the conditions (dock state, daily windows), and the recorder cor
 topics on the robot's disk until the condition holds, through a recorder restart, on a real
 CouchDB-API server (pouchdb-server and the real Apache CouchDB)."""
 import datetime
+import time
 
 import genpy
 import pytest
@@ -12,8 +13,9 @@ from sensor_msgs.msg import Image
 
 from robot_common.errors import ConfigError
 from ros_harness import wait_until
-from ros_mongo import open_store
+from ros_mongo import StoreUnavailable, open_store
 from ros_mongo.params import RecorderParams
+from ros_mongo.recording.bandwidth import Bandwidth, wire_bytes
 from ros_mongo.recording.bounded_spool import BoundedSpool
 from ros_mongo.recording.deferral import Deferral
 from ros_mongo.recording.ledger import Ledger, format_ledger, read_ledger
@@ -126,11 +128,11 @@ def test_the_ledger_adds_each_run_to_the_last_and_survives_restarts(tmp_path):
 class Robot:
     """The recorder core with the camera deferred until docked, its spools in `work`."""
 
-    def __init__(self, store, work, rules):
+    def __init__(self, store, work, rules, bandwidth=None):
         self.spool = BoundedSpool(work / "r.spool", max_bytes=64 << 20, min_free_bytes=0).open()
         self.deferral = Deferral(rules, str(work / "r.spool")).open()
         self.recorder = Recorder(store, self.spool, batch_period=0.05, retry_period=0.2,
-                                 robot_id="r1", deferral=self.deferral).start()
+                                 robot_id="r1", deferral=self.deferral, bandwidth=bandwidth).start()
 
     def send(self, topic, cls, index):
         msg = cls()
@@ -177,3 +179,52 @@ def test_deferred_topics_wait_on_the_robot_until_docked_and_arrive_once_through_
         assert frame_ids(store, CAMERA) == list(range(0, 24, 2))    # each image once
         assert frame_ids(store, "/odom") == list(range(20))
         assert counts["released"] == 12 and counts["deferred_pending"] == 0 and counts["dropped"] == 0
+
+
+class FakeClock:
+    """Time the test controls: waiting advances it."""
+
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self):
+        return self.now
+
+    def wait(self, seconds):
+        self.now += seconds
+
+
+def test_the_bandwidth_cap_lets_live_writes_run_into_debt_and_deferred_ones_wait_for_tokens():
+    clock = FakeClock()
+    cap = Bandwidth(1000.0, clock=clock, wait=clock.wait)   # 1000 B/s, bursts of 1000 B
+    cap.take(3000)                        # live: the bucket holds 1000, so it goes at once ...
+    assert clock.now == 0.0
+    cap.take(10)                          # ... and the next live write waits for the 2000 B debt
+    assert clock.now == pytest.approx(2.0, abs=0.01)
+    cap.take(800, live=False)             # deferred: waits until 800 B are in the bucket
+    assert clock.now == pytest.approx(2.81, abs=0.01)   # (10 B of debt + 800 B) / 1000 B/s
+    cap.take(5000, live=False)            # larger than a burst: waits for a full burst only
+    assert clock.now == pytest.approx(3.81, abs=0.01)
+    with pytest.raises(StoreUnavailable, match="bandwidth cap"):
+        cap.take(10, deadline=clock.now + 1.0)   # 4000 B of debt: not before the deadline
+    assert wire_bytes([]) == 0 and not Bandwidth(0).active
+
+
+def test_a_capped_recorder_uploads_within_the_cap_and_keeps_every_message(couchdb_url, tmp_path):
+    rules = parse_upload_rules(RULES)
+    cap = Bandwidth(200_000.0)   # 200 KB/s; the images below are 1 KB each, odometry about 0.7 KB
+    with open_store(couchdb_url) as store:
+        robot = Robot(store, tmp_path, rules, bandwidth=cap)
+        robot.deferral.set_docked("/docked", True)
+        started = time.monotonic()
+        for index in range(300):
+            robot.send("/odom", Odometry, index)
+            robot.send(CAMERA, Image, index)
+        wait_until(lambda: robot.recorder.counts()["stored"] == 600, LONG, what="600 messages central")
+        elapsed = time.monotonic() - started
+        counts = robot.stop()
+        assert frame_ids(store, "/odom") == frame_ids(store, CAMERA) == list(range(300))
+        assert counts["dropped"] == 0 and counts["released"] == 300
+        # at least 600 B per message on the wire: 360 KB or more through a 200 KB/s bucket that
+        # started with one burst of 200 KB: 0.8 s at the least, however fast the machine
+        assert cap.waited > 0.0 and elapsed >= 0.8

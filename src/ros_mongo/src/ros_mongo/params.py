@@ -102,6 +102,10 @@ class RecorderParams(NodeConfig):
     upload_rules: str = param("", "a YAML file of per-topic upload rules (live, when: kept on the robot "
                                   "until docked / a daily window, local: never sent); empty: every "
                                   "topic live. For a recorder writing to central (fleet.launch)")
+    upload_max_bytes_per_s: float = param(0.0, "the cap on all uploads of this recorder (bytes per "
+                                               "second, as estimated from the messages); live topics "
+                                               "first, released deferred data with the rest; 0.0: none",
+                                          minimum=0.0)
     ledger_period: float = param(5.0, "seconds between saves of the upload ledger "
                                       "(<spool_path>.ledger) and its values on /diagnostics",
                                  minimum=0.1)

@@ -38,6 +38,7 @@ import genpy
 
 from ros_mongo.errors import DocumentsRejected, SpoolError, StoreError
 from ros_mongo.messages.decoding import DecodePolicy
+from ros_mongo.recording.bandwidth import Bandwidth, wire_bytes
 from ros_mongo.recording.bounded_spool import BoundedSpool
 from ros_mongo.recording.chunker import Chunker, ChunkPolicy, PendingChunk
 from ros_mongo.recording.deferral import Deferral, DeferredPart
@@ -82,6 +83,8 @@ class Recorder:
         deferral: the deferred parts of the spool (ros_mongo.recording.deferral; default: none):
             their topics go to their part at once and are written only while its condition holds,
             a batch at a time while fewer than a batch of live messages wait (live first).
+        bandwidth: the upload cap (ros_mongo.recording.bandwidth; default: none): live writes
+            first, released deferred parts with what live writes leave.
     """
 
     def __init__(self, store: MessageStore, spool: BoundedSpool, *, batch_size: int = 500,
@@ -90,13 +93,14 @@ class Recorder:
                  tags: Sequence[str] = (), topic_tags: Optional[Dict[str, Sequence[str]]] = None,
                  quarantine_path: Optional[str] = None, author: Optional[str] = None,
                  decode: Optional[DecodePolicy] = None, chunks: Optional[ChunkPolicy] = None,
-                 deferral: Optional[Deferral] = None):
+                 deferral: Optional[Deferral] = None, bandwidth: Optional[Bandwidth] = None):
         if batch_size < 1 or batch_period <= 0 or max_queue_bytes < 1 or retry_period <= 0 or writers < 1:
             raise ValueError(f"batch_size, batch_period, max_queue_bytes, retry_period and writers must "
                              f"be positive, got {batch_size!r}, {batch_period!r}, {max_queue_bytes!r}, "
                              f"{retry_period!r}, {writers!r}")
         self.writers = int(writers)
         self.store, self.spool, self.deferral = store, spool, deferral
+        self.bandwidth = bandwidth if bandwidth is not None and bandwidth.active else None
         self.uploaded: Dict[str, int] = {}  # messages stored per topic (this process)
         self.quarantine = Quarantine(quarantine_path or str(spool.path) + ".quarantine",
                                      min_free_bytes=0)
@@ -390,7 +394,7 @@ class Recorder:
         with self._count_lock:
             self._counts[counter] += value
 
-    def _store(self, entries: list) -> None:
+    def _store(self, entries: list, live: bool = True) -> None:
         """Store entries; documents refused on their own merits go to the quarantine file. Any
         other StoreError propagates (nothing was lost: ids dedupe the retry)."""
         records = [e for e in entries if isinstance(e, (MessageRecord, ChunkRecord))]
@@ -400,6 +404,8 @@ class Recorder:
         for key in {(r.topic, r.msg_type, r.md5sum, r.callerid) for r in records}:
             if key in self._topics:  # each topic's definition before its messages
                 self.store.put_topic(self._topics[key])
+        if self.bandwidth is not None:
+            self.bandwidth.take(wire_bytes(records), live=live, deadline=self._deadline)
         try:
             self.store.insert_records(records)
         except DocumentsRejected as err:
@@ -487,18 +493,25 @@ class Recorder:
         for part in self.deferral.releasable():
             while (part.spool.pending and self.db_ok and len(self._queue) < self.batch_size
                    and time.monotonic() < self._deadline):
-                self._add("released", self._drain_once(part.spool, RELEASE_BYTES))
+                self._add("released", self._drain_once(part.spool, self._release_bytes(), live=False))
             if len(self._queue) >= self.batch_size:
                 return
 
-    def _drain_once(self, spool: Optional[BoundedSpool] = None, max_bytes: int = 32 * 1024 * 1024) -> int:
+    def _release_bytes(self) -> int:
+        """Bytes per released batch: small beside the cap, so live writes wait little behind it."""
+        if self.bandwidth is None:
+            return RELEASE_BYTES
+        return int(min(RELEASE_BYTES, self.bandwidth.burst / 4))
+
+    def _drain_once(self, spool: Optional[BoundedSpool] = None, max_bytes: int = 32 * 1024 * 1024,
+                    live: bool = True) -> int:
         """Write the next entries of `spool` (default: the recorder's); the messages written."""
         spool = spool or self.spool
         entries, token = spool.read(max_entries=self.batch_size, max_bytes=max_bytes)
         records = sum(message_count(e) for e in entries)
         self.records.complete(entries)
         try:
-            self._store(entries)
+            self._store(entries, live)
         except StoreError as err:  # never skipped: the entries stay in the spool
             spool.release()
             self._went_down(err)

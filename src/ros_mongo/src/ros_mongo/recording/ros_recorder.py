@@ -15,6 +15,7 @@ from robot_common.ros_node import ros_home
 from ros_mongo.compat.legacy import legacy_config
 from ros_mongo.errors import SpoolError
 from ros_mongo.params import ORIGINAL_TOPICS, RecorderParams, compile_patterns
+from ros_mongo.recording.bandwidth import Bandwidth
 from ros_mongo.recording.bounded_spool import BoundedSpool
 from ros_mongo.recording.deferral import Deferral
 from ros_mongo.recording.ledger import Ledger
@@ -75,7 +76,8 @@ class RecorderNode:
             retry_period=config.retry_period, writers=config.writers, session_id=self.session_id,
             robot_id=self.robot_id, tags=config.tags, topic_tags=config.topic_tags,
             quarantine_path=config.quarantine_path or None, author=config.author,
-            decode=config.decode_policy(), chunks=config.chunk_policy(), deferral=deferral)
+            decode=config.decode_policy(), chunks=config.chunk_policy(), deferral=deferral,
+            bandwidth=Bandwidth(config.upload_max_bytes_per_s))
         self.subscribers: Dict[str, rospy.Subscriber] = {}
         self.topic_counts: Dict[str, int] = {}
         self._last_log: Optional[Dict[str, int]] = None
