@@ -175,7 +175,7 @@ class HallwayController:
             return np.zeros(2)
         task = self.task(state, t, angles, ranges, people, velocities)
         command = self.planner.act(state, t, task)
-        reason = self._too_close(angles, ranges, command)
+        reason = self._too_close(angles, ranges, state[3])
         moving = abs(state[3]) > 0.05 or abs(command[0]) > 0.05
         if reason is None and moving:
             self.held_since_, self.status_ = None, "following"
@@ -191,19 +191,26 @@ class HallwayController:
         self.status_ = "waiting"
         return command
 
-    def _too_close(self, angles, ranges, command) -> Optional[str]:
-        """Why the scan forbids moving (anything inside the safety margin), or None."""
+    def _too_close(self, angles, ranges, speed: float) -> Optional[str]:
+        """Why the scan forbids moving, or None: anything within the safety margin of the
+        robot's edge, or - on the side it is driving to - within the margin plus the distance it
+        needs to stop (one cycle at its speed plus braking at the acceleration limit)."""
         ranges, angles = np.asarray(ranges, float), np.asarray(angles, float)
         limit = self.safety["robot_radius"] + self.safety["stop_margin"]
         finite = np.where(np.isfinite(ranges), ranges, np.inf)
         with np.errstate(invalid="ignore"):     # distances from the base (the laser is ahead)
-            distance = np.hypot(self.laser_offset + finite * np.cos(angles), finite * np.sin(angles))
-        close = distance < limit
+            along = self.laser_offset + finite * np.cos(angles)
+            distance = np.hypot(along, finite * np.sin(angles))
+        moving = abs(float(speed))
+        stopping = moving * 0.1 + moving ** 2 / (2.0 * self.model.limits.a_max)
+        ahead = np.sign(speed) * along > 0.0
+        reach = np.where(ahead, limit + stopping, limit)
+        close = distance < reach
         if not close.any():
             return None
         nearest = int(np.argmin(np.where(close, distance, np.inf)))
         return (f"scan {distance[nearest]:.2f} m at {math.degrees(angles[nearest]):.0f} deg inside "
-                f"the {limit:.2f} m safety margin")
+                f"the {reach[nearest]:.2f} m safety margin")
 
 
 @dataclass
