@@ -13,11 +13,12 @@ from sensor_msgs.msg import Image
 
 from robot_common.errors import ConfigError
 from ros_harness import wait_until
-from ros_mongo import StoreUnavailable, open_store
+from ros_mongo import StoreUnavailable, make_record, open_store
 from ros_mongo.params import RecorderParams
 from ros_mongo.recording.bandwidth import Bandwidth, wire_bytes
 from ros_mongo.recording.bounded_spool import BoundedSpool
 from ros_mongo.recording.deferral import Deferral
+from ros_mongo.recording.events import EventRing
 from ros_mongo.recording.ledger import Ledger, format_ledger, read_ledger
 from ros_mongo.recording.recorder import Recorder
 from ros_mongo.recording.upload_rules import (
@@ -128,19 +129,19 @@ def test_the_ledger_adds_each_run_to_the_last_and_survives_restarts(tmp_path):
 class Robot:
     """The recorder core with the camera deferred until docked, its spools in `work`."""
 
-    def __init__(self, store, work, rules, bandwidth=None):
+    def __init__(self, store, work, rules, bandwidth=None, now=time.time):
         self.spool = BoundedSpool(work / "r.spool", max_bytes=64 << 20, min_free_bytes=0).open()
-        self.deferral = Deferral(rules, str(work / "r.spool")).open()
+        self.deferral = Deferral(rules, str(work / "r.spool"), now=now).open()
         self.recorder = Recorder(store, self.spool, batch_period=0.05, retry_period=0.2,
                                  robot_id="r1", deferral=self.deferral, bandwidth=bandwidth).start()
 
-    def send(self, topic, cls, index):
+    def send(self, topic, cls, index, stamp=None):
         msg = cls()
         msg.header.frame_id = str(index)
         if cls is Image:
             msg.height, msg.width, msg.step, msg.encoding = 10, 100, 100, "mono8"
             msg.data = bytes(1000)
-        stamp = genpy.Time(1000 + index, 0)
+        stamp = genpy.Time.from_sec(stamp) if stamp is not None else genpy.Time(1000 + index, 0)
         assert self.recorder.receive(topic, serialized(msg), stamp, cls._type, cls._md5sum,
                                      cls._full_text)
 
@@ -228,3 +229,70 @@ def test_a_capped_recorder_uploads_within_the_cap_and_keeps_every_message(couchd
         # at least 600 B per message on the wire: 360 KB or more through a 200 KB/s bucket that
         # started with one burst of 200 KB: 0.8 s at the least, however fast the machine
         assert cap.waited > 0.0 and elapsed >= 0.8
+
+
+def ring_record(stamp):
+    secs = int(stamp)
+    return make_record(CAMERA, Image, serialized(Image(height=1, width=1, step=1, data=b"x")),
+                       receive=genpy.Time(secs, round((stamp - secs) * 1e9)), robot_id="r1")
+
+
+def test_event_windows_keep_what_two_overlapping_triggers_cover_once_and_recycle_the_rest(tmp_path):
+    infos = {}
+    ring = EventRing(str(tmp_path / "r.spool.event.cam"), before=2.0, after=1.0).open()
+    stamps = [100.0 + 0.5 * i for i in range(21)]          # 100.0, 100.5, ... 110.0
+    for stamp in stamps[:9]:                                # up to 104.0
+        ring.append(ring_record(stamp), infos)
+    assert ring.trigger(104.2, "bump") == pytest.approx((102.2, 105.2))
+    ring.append(ring_record(104.5), infos)
+    ring.close()
+    ring = EventRing(str(tmp_path / "r.spool.event.cam"), before=2.0, after=1.0).open()  # restart
+    assert ring.trigger(104.7, "stall") == pytest.approx((102.7, 105.7))
+    for stamp in stamps[10:13]:                             # 105.0, 105.5, 106.0
+        ring.append(ring_record(stamp), infos)
+    kept = {}
+    for number, entries in ring.collect(106.1):             # at 106.1: the windows are complete
+        kept.update({e.receive_time: e.tags for e in entries})
+        ring.done(number, 106.1)
+    # kept: [102.2, 105.7] = 102.5 ... 105.5 (7 messages); 102.5 only in bump's window, 105.5
+    # only in stall's; recycled: 100.0 ... 102.0 (older than 106.1 - 2 s and in no window)
+    assert sorted(kept) == pytest.approx([102.5, 103.0, 103.5, 104.0, 104.5, 105.0, 105.5])
+    assert kept[min(kept)] == ["event:bump"]
+    assert kept[max(kept)] == ["event:stall"]
+    assert all(tags == ["event:bump", "event:stall"] for t, tags in kept.items() if 102.7 <= t <= 105.2)
+    assert ring.recycled == {CAMERA: 5}
+    for stamp in stamps[13:]:
+        ring.append(ring_record(stamp), infos)
+    leftover = [e for number, entries in ring.collect(130.0) for e in entries]
+    assert leftover == [] and ring.recycled == {CAMERA: 5 + 1 + 8}   # 106.0 and 106.5 ... 110.0
+
+
+def test_an_event_window_triggered_twice_reaches_central_once_labelled_through_a_restart(
+        couchdb_url, tmp_path):
+    rules = parse_upload_rules({"rules": [{"topics": "^/camera/", "upload": "on_event",
+                                           "event": {"before": 2.0, "after": 1.0}}]})
+    clock = FakeClock()
+    with open_store(couchdb_url) as store:
+        robot = Robot(store, tmp_path, rules, now=clock)
+        clock.now = 1004.2
+        for index in range(21):                       # images at 1000.0, 1000.5, ... 1010.0
+            robot.send(CAMERA, Image, index, stamp=1000.0 + 0.5 * index)
+            if index == 8:
+                robot.deferral.trigger("bump")        # keeps [1002.2, 1005.2]
+            if index == 9:
+                clock.now = 1004.7
+                robot.deferral.trigger("stall")       # keeps [1002.7, 1005.7]
+        first = robot.stop()                          # a restart before the windows are decided
+        clock.now = 1020.0
+        robot = Robot(store, tmp_path, rules, now=clock)
+        wait_until(lambda: len(frame_ids(store, CAMERA)) == 7, LONG, what="the window central")
+        wait_until(lambda: robot.recorder.counts()["event_ring"] == 0, LONG, what="the ring decided")
+        counts = robot.stop()
+        stored = {int(m.fields["header"]["frame_id"]): m.tags for m in store.find_messages(topic=CAMERA)}
+        # 1002.5 ... 1005.5 are the images 5 ... 11; 1002.5 is in bump's window only, 1005.5 in stall's
+        assert sorted(stored) == list(range(5, 12))
+        assert "event:bump" in stored[5] and "event:stall" not in stored[5]
+        assert "event:stall" in stored[11] and "event:bump" not in stored[11]
+        assert all({"event:bump", "event:stall"} <= set(stored[i]) for i in range(6, 11))
+        # recycled, by one run or the other: 1000.0 ... 1002.0 and 1006.0 ... 1010.0, each once
+        assert first["recycled"] + counts["recycled"] == 5 + 9 and counts["dropped"] == 0

@@ -20,7 +20,7 @@ __all__ = ["Ledger", "LEDGER_FIELDS", "format_ledger", "read_ledger"]
 log = logging.getLogger(__name__)
 
 #: Counted fields per topic (summed over recorder runs); "waiting" and "reason" are the latest.
-LEDGER_FIELDS = ("recorded", "uploaded", "dropped")
+LEDGER_FIELDS = ("recorded", "uploaded", "dropped", "recycled")
 
 
 class Ledger:

@@ -32,7 +32,7 @@ import logging
 import threading
 import time
 from collections import deque
-from typing import Deque, Dict, List, Optional, Sequence, Tuple
+from typing import Deque, Dict, List, Optional, Sequence, Tuple, Union
 
 import genpy
 
@@ -42,6 +42,7 @@ from ros_mongo.recording.bandwidth import Bandwidth, wire_bytes
 from ros_mongo.recording.bounded_spool import BoundedSpool
 from ros_mongo.recording.chunker import Chunker, ChunkPolicy, PendingChunk
 from ros_mongo.recording.deferral import Deferral, DeferredPart
+from ros_mongo.recording.events import EventRing
 from ros_mongo.recording.quarantine import Quarantine
 from ros_mongo.recording.record_builder import Key as _Key
 from ros_mongo.recording.record_builder import RecordBuilder
@@ -141,7 +142,7 @@ class Recorder:
         """Enqueue one serialized message (or spool it when the queue is full); False if dropped."""
         key = (topic, msg_type, md5sum, callerid)
         cost = len(raw) + ITEM_OVERHEAD
-        part = self.deferral.part_for(topic) if self.deferral is not None else None
+        part = self.deferral.target_for(topic) if self.deferral is not None else None
         with self._cond:
             self._counts["received"] += 1      # one key, only ever written under _cond
             if key not in self._topics:
@@ -165,15 +166,15 @@ class Recorder:
             return self._defer(part, key, raw, receive)
         return self._spill(key, raw, receive)
 
-    def _defer(self, part: DeferredPart, key: _Key, raw: bytes, receive: genpy.Time) -> bool:
-        """Into its deferred part, undecoded (decoded when released)."""
+    def _defer(self, part: Union[DeferredPart, EventRing], key: _Key, raw: bytes,
+               receive: genpy.Time) -> bool:
+        """Into its deferred part or event ring, undecoded (decoded when released)."""
         record = self.records.raw(key, raw, receive.secs, receive.nsecs)
-        with part.lock:
-            try:
-                part.spool.append([record], self._topics)
-            except SpoolError as err:
-                self._drop({key[0]: 1}, f"its part {part.rule.name!r} of the spool is full: {err}")
-                return False
+        try:
+            part.append(record, self._topics)
+        except SpoolError as err:
+            self._drop({key[0]: 1}, f"it cannot be kept on the robot: {err}")
+            return False
         self._add("deferred", 1)
         return True
 
@@ -201,6 +202,8 @@ class Recorder:
         if self.deferral is not None:
             counts["dropped"] += sum(self.deferral.dropped().values())
             counts["deferred_pending"] = self.deferral.pending_records()
+            counts["recycled"] = sum(self.deferral.recycled().values())
+            counts["event_ring"] = sum(r.pending_records() for r in self.deferral.rings.values())
         return counts
 
     def dropped_by_topic(self) -> Dict[str, int]:
@@ -488,7 +491,12 @@ class Recorder:
     def _release(self) -> None:
         """Write deferred parts whose condition holds, a batch at a time while fewer than a batch
         of live messages wait (the kept spool first: it holds live topics)."""
-        if self.deferral is None or self.spool.pending:
+        if self.deferral is None:
+            return
+        lost, why = self.deferral.collect()  # decided event windows into their parts
+        if lost:
+            self._drop(lost, why)
+        if self.spool.pending:
             return
         for part in self.deferral.releasable():
             while (part.spool.pending and self.db_ok and len(self._queue) < self.batch_size

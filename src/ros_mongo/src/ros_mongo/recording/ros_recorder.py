@@ -9,7 +9,8 @@ from typing import Dict, Optional
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from std_msgs.msg import Header
+from std_msgs.msg import Header, String
+from std_srvs.srv import Trigger, TriggerResponse
 
 from robot_common.ros_node import ros_home
 from ros_mongo.compat.legacy import legacy_config
@@ -45,7 +46,10 @@ class RecorderNode:
         or releasing, and its condition), and from the ledger per topic "ledger <topic>"
         (recorded, uploaded, waiting, dropped, and the latest drop reason).
     Subscribes also: the dock topics of the upload rules (std_msgs/Bool or
-        sensor_msgs/BatteryState, read by their type).
+        sensor_msgs/BatteryState, read by their type); with on_event rules ~event (std_msgs/String:
+        the reason; keeps every on_event rule's window around now).
+    Services: with on_event rules ~trigger_event (std_srvs/Trigger: the same, reason "service
+        call"; the message names each window kept).
     The summary logged at shutdown has the same counts, dropped ones per topic. The ledger is
     saved to <spool_path>.ledger every ~ledger_period and at shutdown (`ros_mongo_bag ledger`).
     """
@@ -62,7 +66,8 @@ class RecorderNode:
         self.store = open_store(config.db_url, connect=False, **config.store_options())
         spool_path = config.spool_path or str(ros_home() / "ros_mongo" / f"{node}.spool")
         deferral = Deferral(self.rules, spool_path, policy=config.drop_policy(), fsync=config.spool_fsync,
-                            min_free_bytes=int(config.spool_min_free_mb * 2 ** 20)).open() \
+                            min_free_bytes=int(config.spool_min_free_mb * 2 ** 20),
+                            now=lambda: rospy.get_rostime().to_sec()).open() \
             if self.rules.deferred else None
         self.ledger = Ledger(spool_path + ".ledger").load()
         self.ledger_values: list = []
@@ -95,6 +100,9 @@ class RecorderNode:
         rospy.Timer(rospy.Duration(self.config.ledger_period), self._save_ledger)
         self.dock_subscribers = [rospy.Subscriber(topic, rospy.AnyMsg, self._dock, callback_args=topic)
                                  for topic in self.rules.dock_topics]
+        if self.rules.events:
+            self.dock_subscribers.append(rospy.Subscriber("~event", String, self._event_topic))
+            rospy.Service("~trigger_event", Trigger, self._event_service)
         rospy.loginfo("recording %s into %s (session %s, robot %s, spool %s of at most %.0f MB; when it "
                       "is full the oldest messages of %s go first)", sorted(self.subscribers),
                       self.store.url, self.session_id, self.robot_id, self.recorder.spool.path,
@@ -138,10 +146,23 @@ class RecorderNode:
             docked = False
         self.recorder.deferral.set_docked(topic, docked)
 
+    def _event_topic(self, msg: String) -> None:
+        self._trigger(msg.data or "event")
+
+    def _event_service(self, _request) -> TriggerResponse:
+        return TriggerResponse(success=True, message=self._trigger("service call"))
+
+    def _trigger(self, reason: str) -> str:
+        windows = self.recorder.deferral.trigger(reason)
+        text = "; ".join(f"{rule}: keeping {start:.3f} to {end:.3f}" for rule, start, end in windows)
+        rospy.loginfo("event %r: %s", reason, text)
+        return text
+
     def _ledger_now(self) -> dict:
         recorder = self.recorder
         counts = {"recorded": dict(self.topic_counts), "uploaded": recorder.uploaded_by_topic(),
-                  "dropped": recorder.dropped_by_topic()}
+                  "dropped": recorder.dropped_by_topic(),
+                  "recycled": recorder.deferral.recycled() if recorder.deferral else {}}
         waiting = recorder.spool.pending_topics() if recorder.spool.pending else {}
         if recorder.deferral is not None:
             for topic, count in recorder.deferral.pending_by_topic().items():

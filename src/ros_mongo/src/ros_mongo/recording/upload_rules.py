@@ -14,6 +14,11 @@ The rules file (YAML), read once at start; any error in it is a ConfigError nami
                                       # (power_supply_status CHARGING or FULL)
           window: "22:00-06:00"       # a daily window of local time (may wrap midnight)
         max_mb: 2048                  # the bound of this rule's part of the spool (default 1024)
+      - name: bumper_camera
+        topics: ^/camera/
+        upload: on_event              # the last `before` seconds on the robot's disk; a trigger
+        event: {before: 30, after: 10}  # keeps [t - before, t + after], the rest is recycled
+        when: {docked: /battery_state}  # optional: kept windows wait for it (default: at once)
       - topics: [^/debug/, ^/tf_static$]
         upload: local                 # never leaves the robot
     default: live                     # the rule of topics no rule matches: live or local
@@ -30,9 +35,9 @@ from robot_common.errors import ConfigError
 __all__ = ["UploadRules", "UploadRule", "Condition", "DailyWindow", "load_upload_rules",
            "parse_upload_rules", "docked_from_battery", "MODES", "DEFAULT_PART_MB"]
 
-MODES = ("live", "when", "local")
+MODES = ("live", "when", "on_event", "local")
 DEFAULT_PART_MB = 1024.0
-_RULE_KEYS = {"name", "topics", "upload", "when", "max_mb"}
+_RULE_KEYS = {"name", "topics", "upload", "when", "max_mb", "event"}
 _WHEN_KEYS = {"docked", "window"}
 _NAME_RE = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 _CLOCK_RE = re.compile(r"^(\d{1,2}):(\d{2})$")
@@ -89,15 +94,17 @@ class Condition:
     def describe(self) -> str:
         parts = ([f"docked ({self.docked})"] if self.docked else []) + \
                 ([f"within {self.window.text}"] if self.window else [])
-        return " and ".join(parts)
+        return " and ".join(parts) or "at once"
 
 
 class UploadRule:
     """One rule: the topics it matches, its mode, and for `when` its condition and spool bound."""
 
     def __init__(self, name: str, patterns: Sequence[str], mode: str,
-                 condition: Optional[Condition] = None, max_mb: float = DEFAULT_PART_MB):
+                 condition: Optional[Condition] = None, max_mb: float = DEFAULT_PART_MB,
+                 before: float = 0.0, after: float = 0.0):
         self.name, self.mode, self.condition, self.max_mb = name, mode, condition, float(max_mb)
+        self.before, self.after = float(before), float(after)  # on_event: the window
         self.pattern_texts = list(patterns)
         self.patterns = [re.compile(p) for p in patterns]
 
@@ -124,8 +131,14 @@ class UploadRules:
 
     @property
     def deferred(self) -> List[UploadRule]:
-        """The `when` rules, in order."""
-        return [r for r in self.rules if r.mode == "when"]
+        """The rules whose data waits on the robot (on_event first, then when; each in order)."""
+        return [r for r in self.rules if r.mode == "on_event"] + \
+            [r for r in self.rules if r.mode == "when"]
+
+    @property
+    def events(self) -> List[UploadRule]:
+        """The on_event rules, in order."""
+        return [r for r in self.rules if r.mode == "on_event"]
 
     @property
     def dock_topics(self) -> List[str]:
@@ -195,13 +208,31 @@ def _rule(index: int, item) -> UploadRule:
     mode = item.get("upload")
     if mode not in MODES:
         raise ConfigError(f"{where}: unknown upload mode {mode!r} (known: {', '.join(MODES)})")
-    if mode != "when":
-        if "when" in item or "max_mb" in item:
-            raise ConfigError(f"{where}: 'when' and 'max_mb' belong to upload: when rules, not "
-                              f"{mode!r}")
+    if mode in ("live", "local"):
+        if {"when", "max_mb", "event"} & set(item):
+            raise ConfigError(f"{where}: 'when', 'event' and 'max_mb' belong to upload: when / "
+                              f"on_event rules, not {mode!r}")
         return UploadRule(name, patterns, mode)
-    return UploadRule(name, patterns, mode, _condition(where, item.get("when")),
-                      _max_mb(where, item.get("max_mb", DEFAULT_PART_MB)))
+    if mode == "when" and "event" in item:
+        raise ConfigError(f"{where}: 'event' belongs to upload: on_event rules")
+    before, after = _event(where, item.get("event")) if mode == "on_event" else (0.0, 0.0)
+    when = item.get("when") if mode == "when" or "when" in item else None
+    condition = _condition(where, when) if when is not None or mode == "when" else Condition()
+    return UploadRule(name, patterns, mode, condition,
+                      _max_mb(where, item.get("max_mb", DEFAULT_PART_MB)), before, after)
+
+
+def _event(where: str, event) -> tuple:
+    if not isinstance(event, dict) or set(event) != {"before", "after"}:
+        raise ConfigError(f"{where}: upload: on_event needs 'event' with before and after "
+                          f"(seconds), got {event!r}")
+    for key in ("before", "after"):
+        value = event[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0 \
+                or (key == "before" and value <= 0):
+            raise ConfigError(f"{where}: event '{key}' must be a number of seconds (before > 0, "
+                              f"after >= 0), got {value!r}")
+    return float(event["before"]), float(event["after"])
 
 
 def _condition(where: str, when) -> Condition:
