@@ -1,7 +1,8 @@
 """Upload rules as users run them: `launch/fleet.launch upload_rules:=FILE` (the direct default)
 on a robot's own roscore, recording into a central pouchdb-server. Odometry goes live, camera
 images wait on the robot until a real `rostopic pub` says it is docked (std_msgs/Bool); the
-recorder is restarted in the middle of the deferral; a local-only topic never reaches central.
+recorder is restarted in the middle of the deferral; a local-only topic never reaches central; an
+on_event topic reaches central only inside the window another node's trigger on ~event keeps.
 The ledger command reads what the recorder saved, and it equals central's counts.
 (The same core runs against the real Apache CouchDB in test_upload_rules.py.)"""
 import subprocess
@@ -25,6 +26,10 @@ rules:
     when: {docked: /docked}
   - topics: ^/chatter$
     upload: local
+  - name: blips
+    topics: ^/blips$
+    upload: on_event
+    event: {before: 1.0, after: 0.5}
 """
 
 
@@ -46,7 +51,7 @@ class RuledRobot(FleetRobot):
         self.launches = LaunchSet(self.core, self.work / "launch")
         self.spool = self.work / "recorder.spool"
         self.args = dict(central_url=central_url, robot_id=self.robot_id, upload_rules=str(rules_file),
-                         topics=f"[/odom, {CAMERA}, /chatter]", spool_path=str(self.spool))
+                         topics=f"[/odom, {CAMERA}, /chatter, /blips]", spool_path=str(self.spool))
         self.launch_file = str(workspace_root / "launch" / "fleet.launch")
         self.bag_tool = str(workspace_root / "src" / "ros_mongo" / "scripts" / "ros_mongo_bag")
         self.launch = self.launches(self.launch_file, **self.args)
@@ -66,7 +71,8 @@ class RuledRobot(FleetRobot):
                                 capture_output=True, text=True, env=self.core.env(), timeout=60)
         assert result.returncode == 0, result.stderr
         rows = [line.split() for line in result.stdout.splitlines()[1:]]
-        return {row[0]: [int(v) for v in row[1:5]] for row in rows}  # recorded uploaded dropped waiting
+        # recorded, uploaded, dropped, recycled, waiting
+        return {row[0]: [int(v) for v in row[1:6]] for row in rows}
 
 
 @pytest.mark.ros
@@ -80,10 +86,11 @@ def test_fleet_launch_holds_images_until_docked_through_a_restart_and_keeps_loca
     rules = tmp_path / "rules.yaml"
     rules.write_text(RULES)
     robot = RuledRobot(tmp_path, admin_url, rules, workspace_root)
-    chatter = docked = None
+    chatter = docked = blips = None
     try:
         robot.launch.wait_for_subscribers(["/odom", CAMERA, "/docked"], timeout=LONG)
         chatter = robot.rostopic_pub("/chatter", "std_msgs/String", "data: local only", "-r", "5")
+        blips = robot.rostopic_pub("/blips", "std_msgs/String", "data: blip", "-r", "10")
         robot.publish(count, rate, hold_at=hold)
         wait_until(lambda: central_topics(admin_url).get("/odom", 0) == hold, LONG,
                    what=f"{hold} odometry messages central")
@@ -93,23 +100,34 @@ def test_fleet_launch_holds_images_until_docked_through_a_restart_and_keeps_loca
                    what="every odometry message central")
         wait_until(lambda: not robot.publisher.alive, LONG, what="everything published")
         assert robot.published() == {"/odom": count, CAMERA: count // 10}
-        assert central_topics(admin_url) == {"/odom": count}   # no image, no /chatter yet
+        assert central_topics(admin_url) == {"/odom": count}   # no image, no /chatter, no /blips
+        # another node triggers an event: /blips of [t - 1 s, t + 0.5 s] go up, labelled
+        trigger = robot.rostopic_pub("/ros_mongo_server/event", "std_msgs/String", "data: bump", "-1")
+        wait_until(lambda: central_topics(admin_url).get("/blips", 0) > 0, LONG, what="the event window")
+        trigger.stop()
         # the ledger is saved every ~ledger_period (5 s): the images wait on the robot
-        wait_until(lambda: robot.ledger().get(CAMERA, [0, 0, 0, 0])[3] == count // 10, LONG,
+        wait_until(lambda: robot.ledger().get(CAMERA, [0] * 5)[4] == count // 10, LONG,
                    what="the ledger shows every image waiting")
 
         docked = robot.rostopic_pub("/docked", "std_msgs/Bool", "data: true", "-r", "2")
         wait_until(lambda: central_topics(admin_url).get(CAMERA, 0) == count // 10, LONG,
                    what="every image central after docking")
         docs = messages(all_docs(admin_url))
+        blipped = [d for d in docs if d["topic"] == "/blips"]
+        assert all("event:bump" in d["tags"] for d in blipped)
+        docs = [d for d in docs if d["topic"] != "/blips"]
         ids = [(d["topic"], int(d["msg"]["header"]["frame_id"])) for d in docs]
         assert len(ids) == len(set(ids)) == count + count // 10        # each message once
         assert {i for t, i in ids if t == CAMERA} == set(range(0, count, 10))
         assert "/chatter" not in {d["topic"] for d in docs}           # local never leaves
-        want = {"/odom": [count, count, 0, 0], CAMERA: [count // 10, count // 10, 0, 0]}
-        wait_until(lambda: robot.ledger() == want, LONG, what=f"the ledger equal to central: {want}")
+        want = {"/odom": [count, count, 0, 0, 0], CAMERA: [count // 10, count // 10, 0, 0, 0]}
+        wait_until(lambda: {t: r for t, r in robot.ledger().items() if t != "/blips"} == want, LONG,
+                   what=f"the ledger equal to central: {want}")
+        wait_until(lambda: robot.ledger()["/blips"][1] == central_topics(admin_url)["/blips"], LONG,
+                   what="the ledger's /blips uploaded equal to central's")
+        assert robot.ledger()["/blips"][3] > 0   # recycled: what no window kept
     finally:
-        for process in (chatter, docked):
+        for process in (chatter, docked, blips):
             if process is not None:
                 process.stop()
         robot.close()
