@@ -13,6 +13,8 @@ import requests
 from fleet_helpers import FleetRobot, all_docs, messages
 
 from ros_harness import LaunchSet, ManagedProcess, PouchDBServer, RosCore, wait_until
+from ros_mongo.errors import SpoolError
+from ros_mongo.recording.ledger import read_ledger
 
 LONG = 300.0
 CAMERA = "/camera/rgb/image_raw"
@@ -66,7 +68,18 @@ class RuledRobot(FleetRobot):
                               log_path=self.work / f"pub{argv[0].replace('/', '_')}.log",
                               env=self.core.env()).start()
 
+    def saved_ledger(self):
+        """The ledger file as the recorder last saved it (every ~ledger_period, 5 s):
+        [recorded, uploaded, dropped, recycled, waiting] per topic."""
+        try:
+            rows = read_ledger(str(self.spool) + ".ledger")
+        except SpoolError:
+            return {}
+        return {topic: [int(row.get(k, 0)) for k in ("recorded", "uploaded", "dropped", "recycled",
+                                                       "waiting")] for topic, row in rows.items()}
+
     def ledger(self):
+        """The same, printed by `ros_mongo_bag ledger`."""
         result = subprocess.run([sys.executable, self.bag_tool, "ledger", str(self.spool)],
                                 capture_output=True, text=True, env=self.core.env(), timeout=60)
         assert result.returncode == 0, result.stderr
@@ -103,11 +116,12 @@ def test_fleet_launch_holds_images_until_docked_through_a_restart_and_keeps_loca
         assert central_topics(admin_url) == {"/odom": count}   # no image, no /chatter, no /blips
         # another node triggers an event: /blips of [t - 1 s, t + 0.5 s] go up, labelled
         trigger = robot.rostopic_pub("/ros_mongo_server/event", "std_msgs/String", "data: bump", "-1")
-        wait_until(lambda: central_topics(admin_url).get("/blips", 0) > 0, LONG, what="the event window")
+        wait_until(lambda: central_topics(admin_url).get("/blips", 0) > 0, LONG, interval=0.5,
+                   what="the event window")
         trigger.stop()
         # the ledger is saved every ~ledger_period (5 s): the images wait on the robot
-        wait_until(lambda: robot.ledger().get(CAMERA, [0] * 5)[4] == count // 10, LONG,
-                   what="the ledger shows every image waiting")
+        wait_until(lambda: robot.saved_ledger().get(CAMERA, [0] * 5)[4] == count // 10, LONG,
+                   interval=0.5, what="the ledger shows every image waiting")
 
         docked = robot.rostopic_pub("/docked", "std_msgs/Bool", "data: true", "-r", "2")
         wait_until(lambda: central_topics(admin_url).get(CAMERA, 0) == count // 10, LONG,
@@ -121,11 +135,13 @@ def test_fleet_launch_holds_images_until_docked_through_a_restart_and_keeps_loca
         assert {i for t, i in ids if t == CAMERA} == set(range(0, count, 10))
         assert "/chatter" not in {d["topic"] for d in docs}           # local never leaves
         want = {"/odom": [count, count, 0, 0, 0], CAMERA: [count // 10, count // 10, 0, 0, 0]}
-        wait_until(lambda: {t: r for t, r in robot.ledger().items() if t != "/blips"} == want, LONG,
-                   what=f"the ledger equal to central: {want}")
-        wait_until(lambda: robot.ledger()["/blips"][1] == central_topics(admin_url)["/blips"], LONG,
-                   what="the ledger's /blips uploaded equal to central's")
-        assert robot.ledger()["/blips"][3] > 0   # recycled: what no window kept
+        wait_until(lambda: {t: r for t, r in robot.saved_ledger().items() if t != "/blips"} == want
+                   and robot.saved_ledger()["/blips"][1] == central_topics(admin_url)["/blips"],
+                   LONG, interval=0.5, what=f"the ledger equal to central: {want}")
+        printed = robot.ledger()
+        assert {t: r for t, r in printed.items() if t != "/blips"} == want
+        assert printed["/blips"][1] == central_topics(admin_url)["/blips"]
+        assert printed["/blips"][3] > 0   # recycled: what no window kept
     finally:
         for process in (chatter, docked, blips):
             if process is not None:

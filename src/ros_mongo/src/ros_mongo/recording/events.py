@@ -4,12 +4,13 @@ topics on the robot's disk, kept around triggers, recycled otherwise.
 Messages go to ring segments, `<prefix>.ring.<n>` (the spool's framed format), a new segment every
 `step` seconds and at every window boundary. A trigger at time t with reason r keeps
 [t - before, t + after] (windows are kept in `<prefix>.windows`, so they outlive a restart). A
-message is decided once it lies in a window (kept, tagged `event:<reason>` for each window holding
-it: overlapping windows keep it once) or is older than `now - before` outside every window (no later
-trigger can reach it: recycled, counted per topic). `collect` returns the kept messages of every
-segment whose messages are all decided; the caller stores them in the rule's part of the spool and
-then calls `done`, which deletes the segment (killed in between: the segment is collected again and
-the message ids keep each message once on central).
+message is decided once it is older than `now - before` (no later trigger can reach it): inside
+one or more windows it is kept, once, tagged `event:<reason>` for each of them; outside every
+window it is recycled (counted per topic). So a window reaches the rule's part `before` seconds
+after its end, with the reasons of every trigger that covers each message. `collect` returns
+the kept messages of every segment whose messages are all decided; the caller stores them in the
+rule's part of the spool and then calls `done`, which deletes the segment (killed in between: the
+segment is collected again and the message ids keep each message once on central).
 """
 import json
 import os
@@ -125,7 +126,7 @@ class EventRing:
         return ready
 
     def _decided(self, stamp: float, now: float) -> bool:
-        return stamp < now - self.before or self._reasons(stamp) != []
+        return stamp < now - self.before  # later triggers reach no further back
 
     def _reasons(self, stamp: float) -> List[str]:
         return [reason for start, end, reason in self.windows if start <= stamp <= end]
