@@ -173,6 +173,7 @@ def test_a_forecast_at_once_and_new_robots_served_while_the_gp_is_selected(rosla
     takes minutes to choose and fit; the tuned baselines answer from the first rows on, and a
     robot that starts counting while the GP is being chosen is served before it is done."""
     import rospy
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
     from geometry_msgs.msg import Point
     from std_srvs.srv import Trigger
 
@@ -184,6 +185,8 @@ def test_a_forecast_at_once_and_new_robots_served_while_the_gp_is_selected(rosla
     count, _ = services(rospy)
     status = rospy.ServiceProxy(f"{NODE}/status", Trigger)
     publisher = rospy.Publisher("/people_counts", PeopleCount, queue_size=100)
+    diagnostics = []
+    rospy.Subscriber("/diagnostics", DiagnosticArray, diagnostics.append)
     wait_until(lambda: publisher.get_num_connections() > 0, 90, what="a subscriber")
     sim = PeopleSimulator.from_building(building, 0.5, seed=3)
     free = np.arange(sim.cells.n_cells)
@@ -207,6 +210,11 @@ def test_a_forecast_at_once_and_new_robots_served_while_the_gp_is_selected(rosla
     text = status().message
     assert "r1: 1200 rows from 12 messages" in text, text
     assert "serving the baselines while the GP is selected and fitted" in text, text
+    item = wait_until(lambda: next((s for array in list(diagnostics) for s in array.status
+                                    if s.name == "traffic_gp: crowd model"
+                                    and "serving the baselines" in s.message), None), 60,
+                      what="/diagnostics saying the baselines are served")
+    assert item.level == DiagnosticStatus.WARN, item
 
     new = unseen[:20]                # r2: cells nobody saw before, 3 people in each
     publisher.publish(message("r2", new, 24 + 19.25, [3] * 20))

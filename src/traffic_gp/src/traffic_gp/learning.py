@@ -183,7 +183,8 @@ class Learner:
     def serving_note(self) -> str:
         """'' when the GP is served; else what is served instead and why (short)."""
         if not isinstance(self.model, BaselineForecast):
-            return ""
+            serving = getattr(self.model, "serving_", None)
+            return "" if serving is None else serving.verdict()
         if self.job is not None:
             return "serving the baselines while the GP is selected and fitted"
         return "serving the baselines only: " + (self.note or "no GP yet")

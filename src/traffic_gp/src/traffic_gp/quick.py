@@ -65,7 +65,8 @@ class BaselineForecast(LatentPredictions):
             if self.calibrate:
                 rate = tuned[self.name_]["model"].predict(held.x, held.y, held.t)
                 self.calibration_ = calibrate(held.count, np.log(np.maximum(rate, LOG_FLOOR)),
-                                              0.0, held.exposure, seed=self.random_state or 0)
+                                              0.0, held.exposure, t=held.t,
+                                              seed=self.random_state or 0)
         self._refit(obs)
         self.fit_seconds_ = time.perf_counter() - began
         return self

@@ -14,6 +14,7 @@ from typing import Any, Dict, List, NamedTuple, Optional
 
 import numpy as np
 import rospy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import OccupancyGrid
 from std_srvs.srv import Trigger, TriggerResponse
 
@@ -82,7 +83,10 @@ class TrafficServer:
       model (`<model_path>.learned.json`) and read back with it, so a restarted node resumes
       where the saved model stopped (nothing counted twice).
     Publishes (latched): `~crowd_costmap` (maximum over now .. now + look-ahead) and
-      `~crowd_costmap_now` (nav_msgs/OccupancyGrid, 0..95, walls wall_value).
+      `~crowd_costmap_now` (nav_msgs/OccupancyGrid, 0..95, walls wall_value); `/diagnostics`
+      (diagnostic_msgs/DiagnosticArray, status "traffic_gp: crowd model" every publish period:
+      OK serving the GP, WARN serving the baselines and why, e.g. "GP 1.00x the best baseline
+      on the held-out days (needs <= 0.9x): serving the baselines").
     Services: `~predict_count` (traffic_gp/PredictCount), `~predict_region`
       (traffic_gp/PredictRegion), `~save_model` (std_srvs/Trigger), `~status` (std_srvs/Trigger:
       which robots and how many rows and messages of each the model learned from, the settings
@@ -128,6 +132,7 @@ class TrafficServer:
         latch = dict(queue_size=1, latch=True)
         self.pub_window = rospy.Publisher("~crowd_costmap", OccupancyGrid, **latch)
         self.pub_now = rospy.Publisher("~crowd_costmap_now", OccupancyGrid, **latch)
+        self.pub_diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=5)
         if self.config.source == "central":
             self._start_central()
         else:
@@ -352,6 +357,7 @@ class TrafficServer:
                 f"{self.rows_seen} rows received" + (f"; {note}" if note else ""))
 
     def publish(self) -> None:
+        self.publish_diagnostics()
         if self.model is None or self.cells is None:
             return
         c = self.config
@@ -367,6 +373,18 @@ class TrafficServer:
             msg = grid_to_msg(geometry, c.frame_id, stamp)
             msg.data = grid.ravel().tolist()
             publisher.publish(msg)
+
+    def publish_diagnostics(self) -> None:
+        """What is served and why, on /diagnostics (WARN while the baselines are served)."""
+        with self._lock:
+            note, doing = self.learner.serving_note(), self.learner.describe()
+            rows = self.model.n_rows_ if self.model is not None else 0
+        level = DiagnosticStatus.WARN if note or self.model is None else DiagnosticStatus.OK
+        item = DiagnosticStatus(name="traffic_gp: crowd model", hardware_id="traffic_gp",
+                                level=level, message=note or doing,
+                                values=[KeyValue("learner", doing), KeyValue("rows", str(rows))])
+        self.pub_diagnostics.publish(DiagnosticArray(header=rospy.Header(stamp=rospy.Time.now()),
+                                                     status=[item]))
 
     def _save_service(self, _req):
         try:

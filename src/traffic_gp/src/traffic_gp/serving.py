@@ -7,7 +7,13 @@ error of its forecast of the held-out (most recent) days, forms the blend of the
 better baseline (expected counts w x GP + (1 - w) x baseline, w of BLEND_WEIGHTS chosen on the
 same days: a combination of two forecasts whose errors differ beats either where both are
 good), and compares the four forecasts of those days:
-  - the GP is served everywhere (`default`) unless another forecast was clearly better over the
+  - the GP is served only when it earns its cost: when neither the GP nor the blend has a
+    held-out RMSE of at most GP_MARGIN (0.9) times the best baseline's (`gp_ratio`: against
+    the rates, the counts' Poisson noise, their mean, taken out of each squared error), the
+    best baseline is served everywhere (other baselines at places where clearly better) and
+    the status says so ("GP 1.00x the best baseline on the held-out days: serving the
+    baselines");
+  - else the GP is served everywhere (`default`) unless another forecast was clearly better over the
     held-out days: its squared errors of the counts, summed per place and day, are lower than
     the GP's by more than SWITCH_T standard errors (then the best such one is served, and the
     status says so: a GP that loses is not served silently; a difference within the noise of
@@ -38,6 +44,9 @@ FORECASTERS = ("gp", "fremen", "binned_mean", "blend")
 BLEND_WEIGHTS = (0.25, 0.5, 0.75)
 MIN_PLACE_ROWS = 8
 SWITCH_T = 2.0
+GP_MARGIN = 0.9           # the GP or its blend must reach this share of the best baseline's RMSE
+BASELINES = ("fremen", "binned_mean")
+NOISE_KEEP = 0.01         # share of a squared error always kept when the count noise is taken out
 BIN_MINUTES = (5, 10, 20, 30, 60, 120)
 FREMEN_ORDERS = (0, 1, 2, 3, 4, 6, 8, 12, 16)
 WEEKLY_DAYS = 14          # a weekly period is tried once the fitting rows span this many days
@@ -106,6 +115,22 @@ def choose_default(errors: Dict[str, np.ndarray], blocks: np.ndarray) -> Tuple[s
     if not better:
         return "gp", t_stats
     return min(better, key=lambda name: float(np.mean(errors[name]))), t_stats
+
+
+def gp_ratio(rmse: Dict[str, float], noise: float = 0.0) -> Optional[float]:
+    """RMSE of the better of the GP and its blend over the best baseline's (None without
+    baselines), against the rates: `noise`, the counts' own variance about their rate (Poisson:
+    their mean), is taken out of each mean squared error (at least NOISE_KEEP of it is kept), so
+    that small counts, whose error is mostly their own noise, do not pull every ratio to 1."""
+    def excess(name: str) -> float:
+        square = rmse[name] ** 2
+        return max(square - noise, NOISE_KEEP * square)
+
+    base = [excess(name) for name in BASELINES if name in rmse]
+    if not base:
+        return None
+    gp = min(excess(name) for name in ("gp", "blend") if name in rmse)
+    return float(np.sqrt(gp / max(min(base), 1e-300)))
 
 
 def _switches(errors: Dict[str, np.ndarray], place: np.ndarray, n_places: int,
@@ -193,6 +218,14 @@ class Serving:
                 self.places, self.report["shortest_period"], rows)
         return self
 
+    def verdict(self) -> str:
+        """'' when the GP (or its blend) is served; else why the baselines are."""
+        r = self.report
+        if not r.get("gp_lost"):
+            return ""
+        return (f"GP {r['gp_ratio']:.2f}x the best baseline on the held-out days (needs "
+                f"<= {r['gp_margin']:g}x): serving the baselines")
+
     def summary(self) -> str:
         """One line: what is served where, why, and the interval width."""
         r = self.report
@@ -202,6 +235,8 @@ class Serving:
         what = r["default"] + (f" ({blend['weight']:g} GP + {1 - blend['weight']:g} "
                                f"{blend['with']})" if r["default"] == "blend" and blend else "")
         text = (f"serving {what} (held-out RMSE {rmse}); places: {counts}")
+        if self.verdict():
+            text = self.verdict() + "; " + text
         if self.calibration is not None:
             text += "; " + self.calibration.describe()
         return text
@@ -265,9 +300,15 @@ def build(gp_mean: np.ndarray, gp_var: np.ndarray, places: PlaceIndex, fit: Obse
     rmse = {name: float(np.sqrt(np.mean(err))) for name, err in errors.items()}
     place = places.index_at(held.x, held.y)
     default, t_stats = choose_default(errors, place * 100000 + np.floor(held.t / 24.0))
+    ratio = gp_ratio(rmse, float(np.mean(held.count)))     # Poisson noise: the mean count
+    gp_lost = ratio is not None and ratio > GP_MARGIN
+    if gp_lost:               # only the baselines compete, per place too
+        default = min(BASELINES, key=rmse.get)
+        errors = {name: errors[name] for name in BASELINES}
     choice = _switches(errors, place, places.n_cells, default) if fallback \
         else np.zeros(places.n_cells, np.int64)
     report = {"held_out_rmse": rmse, "default": default, "shortest_period": shortest_period,
+              "gp_ratio": ratio, "gp_margin": GP_MARGIN, "gp_lost": gp_lost,
               "blend": blend, "t_against_gp": {k: round(v, 2) for k, v in t_stats.items()},
               "baselines": {name: {"setting": entry["setting"], "table": entry["table"]}
                             for name, entry in tuned.items()},
@@ -278,5 +319,6 @@ def build(gp_mean: np.ndarray, gp_var: np.ndarray, places: PlaceIndex, fit: Obse
     served_pred = held.exposure * predictive.expected_value(mean, var)
     report["served_held_out_rmse"] = float(np.sqrt(np.mean((served_pred - held.count) ** 2)))
     if calibrated:
-        serving.calibration = calibrate(held.count, mean, var, held.exposure, seed=seed)
+        serving.calibration = calibrate(held.count, mean, var, held.exposure, t=held.t,
+                                        seed=seed)
     return serving
