@@ -9,13 +9,15 @@ roscore, the central pouchdb-server and traffic_gp with ~source central (the cen
 feed), with a small, quick model (no hold-out days) so that the chapter takes a minute.
 Central is stopped while the robots go on counting (each recorder spools) and started again (the
 spools drain, in order, each message once). The chapter then shows that central holds exactly what
-each robot's recorder received, and the crowd model's rows per robot.
+each robot's recorder received, and the crowd model's rows per robot. robot1 also has upload rules
+(UPLOAD_RULES): its /snapshots wait on its disk until it docks (std_msgs/Bool /docked), and its
+/bumper goes up only inside the window an event keeps (~event, from another node).
 """
 import re
 import shutil
 import subprocess
 from pathlib import Path
-from typing import Dict, Tuple
+from typing import Dict, List, Optional, Tuple
 
 import requests
 import yaml
@@ -33,6 +35,18 @@ RECORDED_BEFORE = 30    # counts of each robot central before the outage
 RECORDED_WHILE_DOWN = 20  # counts each robot records (spools) while central is down
 RECORDER = "ros_mongo_server: recorder"
 QUICK_MODEL = "{validation_fraction: 0.0}"
+UPLOAD_RULES = """\
+rules:
+  - name: snapshots
+    topics: ^/snapshots$
+    upload: when
+    when: {docked: /docked}
+  - name: bumper
+    topics: ^/bumper$
+    upload: on_event
+    event: {before: 1.0, after: 0.5}
+default: live
+"""
 
 
 def call_trigger(core, service: str, timeout: float = 60.0) -> Tuple[bool, str]:
@@ -45,16 +59,21 @@ def call_trigger(core, service: str, timeout: float = 60.0) -> Tuple[bool, str]:
     return bool(answer.get("success")), str(answer.get("message", ""))
 
 
-def people_counts(db_url: str) -> Dict[str, int]:
-    """PeopleCount message documents per robot id in a database (read over HTTP)."""
+def message_docs(db_url: str) -> List[dict]:
+    """Every message document of a database (read over HTTP)."""
     answer = requests.get(db_url + "/_all_docs", params={"include_docs": "true"}, timeout=60)
     if answer.status_code == 404:
-        return {}
+        return []
     answer.raise_for_status()
+    return [row["doc"] for row in answer.json()["rows"]
+            if (row.get("doc") or {}).get("kind") == "message"]
+
+
+def people_counts(db_url: str) -> Dict[str, int]:
+    """PeopleCount message documents per robot id in a database."""
     counts: Dict[str, int] = {}
-    for row in answer.json()["rows"]:
-        doc = row.get("doc") or {}
-        if doc.get("kind") == "message" and doc.get("type") == PEOPLE_TYPE:
+    for doc in message_docs(db_url):
+        if doc.get("type") == PEOPLE_TYPE:
             counts[doc.get("robot_id")] = counts.get(doc.get("robot_id"), 0) + 1
     return counts
 
@@ -76,15 +95,18 @@ class SimulatedRobot:
     """One robot: roscore, fleet.launch in its default form (recorder + spool), people_sim."""
 
     def __init__(self, robot_id: str, index: int, work: Path, central_url: str, map_yaml: Path,
-                 fleet_launch: str):
+                 fleet_launch: str, rules: Optional[Path] = None):
         from ros_harness import LaunchSet, RosCore
 
         self.robot_id = robot_id
         self.work = work / robot_id
         self.core = RosCore(log_dir=self.work / "ros").start()
         self.launches = LaunchSet(self.core, self.work / "logs")
+        extra = dict(upload_rules=str(rules)) if rules else {}
+        topics = f"[{TOPIC}, /snapshots, /bumper]" if rules else f"[{TOPIC}]"
         self.fleet = self.launches(fleet_launch, central_url=central_url, robot_id=robot_id,
-                                   topics=f"[{TOPIC}]", spool_path=str(self.work / "recorder.spool"))
+                                   topics=topics, spool_path=str(self.work / "recorder.spool"), **extra)
+        self.extras: List = []
         self.index = index
         self.map_yaml = map_yaml
         self.sim = None
@@ -101,11 +123,24 @@ class SimulatedRobot:
             self.sim = None
 
     def recorder(self) -> Dict[str, int]:
-        """received, stored and spool_pending of the robot's recorder."""
+        """received (people counts), stored and spool_pending of the robot's recorder."""
         values = recorder_values(self.core)
-        return {key: int(values[key]) for key in ("received", "stored", "spool_pending")}
+        return {"received": int(values.get(f"topic {TOPIC}", 0)), "stored": int(values["stored"]),
+                "spool_pending": int(values["spool_pending"])}
+
+    def rostopic_pub(self, *argv: str):
+        """A real `rostopic pub` on this robot's roscore (stopped with the robot)."""
+        from ros_harness import ManagedProcess
+
+        process = ManagedProcess(["rostopic", "pub", *argv], name=f"rostopic pub {argv[0]}",
+                                 log_path=self.work / f"pub{argv[0].replace('/', '_')}.log",
+                                 env=self.core.env()).start()
+        self.extras.append(process)
+        return process
 
     def close(self) -> None:
+        for process in self.extras:
+            process.stop()
         self.launches.stop_all()
         self.core.stop()
 
@@ -132,8 +167,10 @@ def run(demo) -> None:
     robots = []
     try:
         print(f"  central: {central_url} (pouchdb-server), roscore {central_core.uri}")
+        rules = work / "robot1_upload_rules.yaml"
+        rules.write_text(UPLOAD_RULES)
         robots = [SimulatedRobot(robot_id, i, work, central_url, map_yaml,
-                                 demo.workspace_launch("fleet.launch"))
+                                 demo.workspace_launch("fleet.launch"), rules if i == 0 else None)
                   for i, robot_id in enumerate(ROBOTS)]
         central_launches("traffic_gp", "traffic_gp.launch", map_yaml=str(map_yaml), source="central",
                          central_url=central_url, min_rows=1, initial_steps=20, n_inducing=32,
@@ -146,9 +183,14 @@ def run(demo) -> None:
             robot.start_counting()
             print(f"  {robot.robot_id}: roscore {robot.core.uri}, recording {TOPIC} straight to "
                   f"central, spool {robot.work / 'recorder.spool'}")
+        snapshots = robots[0].rostopic_pub("/snapshots", "std_msgs/String", "data: snapshot", "-r", "2")
+        robots[0].rostopic_pub("/bumper", "std_msgs/String", "data: bump", "-r", "10")
+        print("  robot1 also records /snapshots (upload: when docked) and /bumper (upload: on_event, "
+              "1 s before and 0.5 s after an event)")
         waits.wait_until(lambda: all(people_counts(central_url).get(r.robot_id, 0) >= RECORDED_BEFORE
                                      for r in robots), 240,
                          f"{RECORDED_BEFORE} counts of every robot central", interval=0.5)
+        robots[0].rostopic_pub("/ros_mongo_server/event", "std_msgs/String", "data: door opened", "-1")
 
         outage(central, robots, central_url)
 
@@ -157,8 +199,7 @@ def run(demo) -> None:
 
         def all_central():
             states = {r.robot_id: r.recorder() for r in robots}
-            done = all(s["spool_pending"] == 0 and s["stored"] == s["received"]
-                       for s in states.values())
+            done = all(s["spool_pending"] == 0 for s in states.values())
             received = {robot_id: s["received"] for robot_id, s in states.items()}
             return received if done and people_counts(central_url) == received else None
         recorded = waits.wait_until(all_central, 240, "every robot's spool drained and every count central",
@@ -167,6 +208,8 @@ def run(demo) -> None:
         central_counts = people_counts(central_url)
         for robot_id, count in recorded.items():
             print(f"    {robot_id}: {count} = {central_counts[robot_id]}")
+        snapshots.stop()
+        docking(robots[0], central_url)
 
         def learned_all():
             ok, text = call_trigger(central_core, "/traffic_gp/status")
@@ -208,3 +251,28 @@ def outage(central, robots, central_url: str) -> None:
         for robot_id, s in states.items()))
     central.start()
     print(f"  central started again on the same port and data: {central.url}")
+
+
+def docking(robot: SimulatedRobot, central_url: str) -> None:
+    """robot1's deferred /snapshots: none central until it docks, then every one, once; and the
+    /bumper window its event kept."""
+    def topic_docs(topic):
+        return [d for d in message_docs(central_url) if d.get("topic") == topic]
+
+    print(f"  robot1 undocked: {len(topic_docs('/snapshots'))} /snapshots central (they wait on its disk)")
+    robot.rostopic_pub("/docked", "std_msgs/Bool", "data: true", "-r", "2")
+
+    def all_snapshots():
+        values = recorder_values(robot.core)
+        recorded = int(values.get("topic /snapshots", 0))
+        return values if len(topic_docs("/snapshots")) >= recorded > 0 else None
+    values = waits.wait_until(all_snapshots, 120, "robot1's snapshots central after docking",
+                              interval=0.5)
+    stamps = [d["_id"] for d in topic_docs("/snapshots")]
+    print(f"  robot1 docked (/docked true): {len(stamps)} of {values['topic /snapshots']} /snapshots "
+          f"recorded are central, {len(stamps) - len(set(stamps))} twice")
+    window = waits.wait_until(lambda: topic_docs("/bumper") or None, 120, "robot1's event window central",
+                              interval=0.5)
+    labels = sorted({tag for d in window for tag in d.get("tags", []) if tag.startswith("event:")})
+    print(f"  robot1's event window: {len(window)} /bumper messages central, labelled {labels}; "
+          f"ledger /bumper: {values.get('ledger /bumper', 'not saved yet')}")
