@@ -13,7 +13,8 @@ feature set, the controller settings (hallway.HALLWAY_DRIVING) and the baselines
 fixed without F's drives):
   * a new person of F gives demonstrations on training-floor scenes (only successful takes);
     the reward is learned (hallway.fit_hallway_reward), its pace set to the person's
-    (calibrate_pace), the barrier margin to the person's room (room_margin) and checked with the controller in the loop on two of the demonstrated
+    (calibrate_pace), the barrier margin to the person's room (room_margin) and checked
+    with the controller in the loop on two of the demonstrated
     scenes (hallway_acceptance: refused only for failing where the person succeeded; a refused
     reward scores 0 %);
   * on test-floor scenes the person drives, the learned controller drives with the node's 0.1 s

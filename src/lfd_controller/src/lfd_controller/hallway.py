@@ -34,7 +34,8 @@ from lfd_controller.planner import RecedingHorizonController
 from lfd_controller.rewards import RewardDerivatives
 from robot_common.tasks import ObstacleMotion, Scenario
 
-__all__ = ["HALLWAY_DRIVING", "HALLWAY_SAFETY", "room_margin", "TaskBuilder", "HallwayBarrier", "HallwayController",
+__all__ = ["HALLWAY_DRIVING", "HALLWAY_SAFETY", "room_margin", "TaskBuilder", "HallwayBarrier",
+           "HallwayController",
            "HallwayDemonstration",
            "HallwayCIOC", "hallway_scenario", "fit_hallway_reward", "hallway_windows",
            "task_from_view"]
