@@ -86,7 +86,12 @@ def test_docked_means_a_true_bool_or_a_battery_charging_or_full():
      r"unknown conditions \['charging'\]"),
     ({"rules": [{"topics": "a", "upload": "when", "when": {"docked": "/d"}, "max_mb": -1}]},
      r"'max_mb' must be a positive number, got -1"),
-    ({"rules": [{"topics": "a", "upload": "live", "max_mb": 5}]}, r"belong to upload: when rules"),
+    ({"rules": [{"topics": "a", "upload": "live", "max_mb": 5}]}, r"belong to upload: when / on_event rules"),
+    ({"rules": [{"topics": "a", "upload": "on_event"}]}, r"on_event needs 'event' with before and after"),
+    ({"rules": [{"topics": "a", "upload": "on_event", "event": {"before": 0, "after": 1}}]},
+     r"event 'before' must be a number of seconds \(before > 0, after >= 0\), got 0"),
+    ({"rules": [{"topics": "a", "upload": "when", "when": {"docked": "/d"}, "event": {}}]},
+     r"'event' belongs to upload: on_event rules"),
     ({"rules": [{"topics": "a", "upload": "live", "priority": 1}]}, r"unknown keys \['priority'\]"),
     ({"rules": [{"name": "x", "topics": "a", "upload": "live"},
                 {"name": "x", "topics": "b", "upload": "local"}]}, r"repeated: \['x'\]"),
@@ -118,8 +123,8 @@ def test_the_ledger_adds_each_run_to_the_last_and_survives_restarts(tmp_path):
     again = Ledger(tmp_path / "s.ledger").load()
     second = again.combine({"recorded": {CAMERA: 2}, "uploaded": {CAMERA: 4}, "dropped": {CAMERA: 1}},
                            {}, {CAMERA: "spool full"})
-    assert second == {"/odom": {"recorded": 10, "uploaded": 10, "dropped": 0, "waiting": 0},
-                      CAMERA: {"recorded": 5, "uploaded": 4, "dropped": 1, "waiting": 0,
+    assert second == {"/odom": {"recorded": 10, "uploaded": 10, "dropped": 0, "recycled": 0, "waiting": 0},
+                      CAMERA: {"recorded": 5, "uploaded": 4, "dropped": 1, "recycled": 0, "waiting": 0,
                                "reason": "spool full"}}
     again.save(second)
     assert read_ledger(tmp_path / "s.ledger") == second
