@@ -12,7 +12,7 @@ from ros_mongo_samples import serialized
 from sensor_msgs.msg import Image
 
 from robot_common.errors import ConfigError
-from ros_harness import wait_until
+from ros_harness import free_port, wait_until
 from ros_mongo import StoreUnavailable, make_record, open_store
 from ros_mongo.params import RecorderParams
 from ros_mongo.recording.bandwidth import Bandwidth, wire_bytes
@@ -305,3 +305,19 @@ def test_an_event_window_triggered_twice_reaches_central_once_labelled_through_a
         assert all({"event:bump", "event:stall"} <= set(stored[i]) for i in range(6, 11))
         # recycled, by one run or the other: 1000.0 ... 1002.0 and 1006.0 ... 1010.0, each once
         assert first["recycled"] + counts["recycled"] == 5 + 9 and counts["dropped"] == 0
+
+
+def test_event_rings_recycle_while_central_is_unreachable(tmp_path):
+    rules = parse_upload_rules({"rules": [{"topics": "^/camera/", "upload": "on_event",
+                                           "event": {"before": 2.0, "after": 1.0}}]})
+    clock = FakeClock()
+    down = f"http://127.0.0.1:{free_port()}/nothing_listens_here"
+    with open_store(down, connect=False, timeout=1.0) as store:
+        robot = Robot(store, tmp_path, rules, now=clock)
+        clock.now = 1000.0
+        for index in range(10):                       # 1000.0 ... 1004.5, no trigger
+            robot.send(CAMERA, Image, index, stamp=1000.0 + 0.5 * index)
+        clock.now = 1010.0                            # all older than before: recycled
+        wait_until(lambda: robot.recorder.counts()["recycled"] == 10, LONG, what="the ring recycled")
+        counts = robot.stop()
+        assert counts["event_ring"] == 0 and counts["stored"] == 0 and counts["dropped"] == 0

@@ -283,6 +283,7 @@ class Recorder:
             if ticket is not None:
                 self._write(items, ticket)
             if index == 0:  # one thread probes and drains
+                self._collect_events()
                 self._probe_and_drain()
             with self._cond:
                 if self._stopping and not self._queue:
@@ -292,6 +293,7 @@ class Recorder:
                 thread.join(max(0.0, self._deadline - time.monotonic()))
             while self.spool.pending and self.db_ok and time.monotonic() < self._deadline:
                 self._drain_once()
+            self._collect_events()
             self._release()
 
     def _take(self) -> Tuple[List[tuple], Optional[int]]:
@@ -488,15 +490,18 @@ class Recorder:
             self._drain_once()
         self._release()
 
+    def _collect_events(self) -> None:
+        """Decided event windows into their parts, the rest recycled (whether central answers
+        or not: the rings hold `before` seconds)."""
+        if self.deferral is not None and self.deferral.rings:
+            lost, why = self.deferral.collect()
+            if lost:
+                self._drop(lost, why)
+
     def _release(self) -> None:
         """Write deferred parts whose condition holds, a batch at a time while fewer than a batch
         of live messages wait (the kept spool first: it holds live topics)."""
-        if self.deferral is None:
-            return
-        lost, why = self.deferral.collect()  # decided event windows into their parts
-        if lost:
-            self._drop(lost, why)
-        if self.spool.pending:
+        if self.deferral is None or self.spool.pending:
             return
         for part in self.deferral.releasable():
             while (part.spool.pending and self.db_ok and len(self._queue) < self.batch_size
