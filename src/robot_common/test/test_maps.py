@@ -86,3 +86,28 @@ def test_bad_map_files_give_clear_errors(tmp_path, content, message):
     (tmp_path / "bad.yaml").write_text(content)
     with pytest.raises(MapError, match=message):
         load_map(tmp_path / "bad.yaml")
+
+
+def test_a_ray_enters_and_leaves_the_first_disc_in_its_way():
+    from robot_common.maps import ray_disc_hits
+
+    centres = np.array([[4.0, 0.0], [2.0, 0.0]])
+    entry, exit_ = ray_disc_hits(0.0, 0.0, np.array([0.0, math.pi]), centres, 0.5)
+    # along +x: the disc at 2 m (not the one at 4 m) from 1.5 to 2.5 m; along -x: nothing
+    assert entry[0] == pytest.approx(1.5) and exit_[0] == pytest.approx(2.5)
+    assert np.isinf(entry[1]) and np.isinf(exit_[1])
+    # a ray from inside the disc at (0, 0.2), along +y: entered 0.3 m behind, left 0.7 m ahead
+    entry, exit_ = ray_disc_hits(0.0, 0.0, np.array([math.pi / 2]), np.array([[0.0, 0.2]]), 0.5)
+    assert entry[0] == pytest.approx(-0.3) and exit_[0] == pytest.approx(0.7)
+    none, _ = ray_disc_hits(0.0, 0.0, np.array([0.0]), np.zeros((0, 2)), 0.5)
+    assert np.isinf(none).all()
+
+
+def test_a_point_falls_in_the_beam_that_points_at_it():
+    from robot_common.maps import beam_indices
+
+    angles = np.linspace(-math.pi / 2, math.pi / 2, 5)     # beams every 45 degrees, facing +y
+    # a sensor at (1, 1) facing +y: (1, 3) is straight ahead (beam 2), (3, 1) on its right
+    # (beam 0), (1, -1) behind it (outside the field of view)
+    beams = beam_indices((1.0, 1.0, math.pi / 2), angles, [1.0, 3.0, 1.0], [3.0, 1.0, -1.0])
+    assert beams.tolist() == [2, 0, -1]

@@ -166,6 +166,42 @@ def raycast(grid: GridMap, x: float, y: float, angles: np.ndarray, max_range: fl
     return np.minimum(ranges, max_range)
 
 
+def ray_disc_hits(x: float, y: float, angles: np.ndarray, centres: np.ndarray,
+                  radius: float) -> Tuple[np.ndarray, np.ndarray]:
+    """(entry, exit) distances along each ray from (x, y) through the first disc of `radius` at
+    `centres` in its way (the nearest entry ahead of the ray's start; inf, inf: none).
+
+    A ray starting inside a disc has a negative entry. Vectorised over rays and discs.
+    """
+    angles = np.asarray(angles, dtype=float)
+    none = np.full(angles.shape, np.inf)
+    centres = np.asarray(centres, dtype=float).reshape(-1, 2)
+    if len(centres) == 0:
+        return none, none.copy()
+    cos, sin = np.cos(angles)[..., None], np.sin(angles)[..., None]
+    dx, dy = centres[:, 0] - x, centres[:, 1] - y
+    along = dx * cos + dy * sin
+    half = np.sqrt(np.maximum(radius ** 2 - (dx * dx + dy * dy - along ** 2), 0.0))
+    hit = (along > 0) & (half > 0)
+    entry = np.where(hit, along - half, np.inf)
+    first = entry.argmin(axis=-1)[..., None]
+    nearest = np.take_along_axis(entry, first, axis=-1)[..., 0]
+    far = np.take_along_axis(np.where(hit, along + half, np.inf), first, axis=-1)[..., 0]
+    return nearest, far
+
+
+def beam_indices(pose: Tuple[float, float, float], angles: np.ndarray, px, py) -> np.ndarray:
+    """Index of the scan beam (sensor-frame `angles`, evenly spaced, from a sensor at `pose`
+    x, y, yaw) whose direction holds each world point (px, py); -1 outside the field of view."""
+    x, y, yaw = pose
+    angles = np.asarray(angles, dtype=float)
+    increment = (angles[-1] - angles[0]) / max(len(angles) - 1, 1)
+    dx, dy = np.asarray(px, dtype=float) - x, np.asarray(py, dtype=float) - y
+    relative = np.mod(np.arctan2(dy, dx) - yaw - angles[0] + increment / 2, 2 * math.pi)
+    beam = np.floor(relative / increment).astype(int) if increment > 0 else np.zeros_like(dx, int)
+    return np.where((beam >= 0) & (beam < len(angles)), beam, -1)
+
+
 def yaw_to_quaternion(yaw: float) -> Tuple[float, float, float, float]:
     """(x, y, z, w) of a rotation about z."""
     return 0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)

@@ -20,7 +20,7 @@ from typing import List, Optional, Tuple
 
 import numpy as np
 
-from robot_common.maps import raycast
+from robot_common.maps import beam_indices, ray_disc_hits, raycast
 from robot_sim.errors import SimError
 from robot_sim.people import PeopleSimulator
 
@@ -77,17 +77,8 @@ class Crowd:
 def disc_ranges(x: float, y: float, angles: np.ndarray, centres: np.ndarray,
                 radius: float) -> np.ndarray:
     """Distance along each ray from (x, y) to the first disc of `radius` at `centres` (inf: none)."""
-    ranges = np.full(len(angles), np.inf)
-    if len(centres) == 0:
-        return ranges
-    cos, sin = np.cos(angles)[:, None], np.sin(angles)[:, None]
-    dx, dy = centres[None, :, 0] - x, centres[None, :, 1] - y
-    along = dx * cos + dy * sin
-    across2 = (dx * dx + dy * dy) - along ** 2
-    inside = radius ** 2 - across2
-    hit = (inside >= 0) & (along > 0)
-    entry = np.where(hit, along - np.sqrt(np.maximum(inside, 0.0)), np.inf)
-    return np.maximum(entry, 0.0).min(axis=1)
+    entry, _ = ray_disc_hits(x, y, angles, centres, radius)
+    return np.maximum(entry, 0.0)
 
 
 class Tracker:
@@ -122,15 +113,12 @@ class Tracker:
         return ranges, report, truth
 
     def _visible(self, crowd: Crowd, pose, angles, ranges, max_range) -> np.ndarray:
-        x, y, yaw = pose
+        x, y, _ = pose
         if crowd.names.size == 0:
             return np.zeros(0, dtype=np.int64)
-        dx, dy = crowd.xy[:, 0] - x, crowd.xy[:, 1] - y
-        dist = np.hypot(dx, dy)
-        increment = (angles[-1] - angles[0]) / (len(angles) - 1)
-        relative = np.mod(np.arctan2(dy, dx) - yaw - angles[0] + increment / 2, 2 * math.pi)
-        beam = np.floor(relative / increment).astype(int)
-        ok = (beam < len(angles)) & (dist <= max_range)
+        dist = np.hypot(crowd.xy[:, 0] - x, crowd.xy[:, 1] - y)
+        beam = beam_indices(pose, angles, crowd.xy[:, 0], crowd.xy[:, 1])
+        ok = (beam >= 0) & (dist <= max_range)
         ok[ok] &= ranges[beam[ok]] >= dist[ok] - crowd.radius - 1e-6
         return np.nonzero(ok)[0]
 

@@ -27,7 +27,7 @@ from typing import Dict, List, Optional, Sequence, Set, Tuple
 import numpy as np
 
 from robot_common.cells import DWELL_TIME_S, CellGrid
-from robot_common.maps import raycast
+from robot_common.maps import beam_indices, ray_disc_hits, raycast
 from traffic_gp.errors import TrafficError
 
 __all__ = ["Detection", "Scan", "Watch", "PeopleCounter", "beam_ranges", "seen_points"]
@@ -96,13 +96,8 @@ def beam_ranges(scan: Scan, vis_grid, people: Sequence[Detection], *, max_range:
     measured = np.where(np.isnan(measured) | (measured < scan.range_min), 0.0, measured)
     measured = np.where(measured > scan.range_max, reach, measured)
     world = yaw + np.asarray(scan.angles, dtype=float)
-    near, far = np.full(world.shape, np.inf), np.full(world.shape, np.inf)
-    for person in people:
-        dx, dy = person.x - x, person.y - y
-        along = dx * np.cos(world) + dy * np.sin(world)
-        half = np.sqrt(np.maximum(person_radius ** 2 - (dx * dx + dy * dy - along ** 2), 0.0))
-        first = (along > 0) & (half > 0) & (along - half < near)
-        near, far = np.where(first, along - half, near), np.where(first, along + half, far)
+    near, far = ray_disc_hits(x, y, world, [(person.x, person.y) for person in people],
+                              person_radius)
     on_person = np.isfinite(near) & (measured >= near - person_radius)
     stops = np.where(on_person, np.minimum(far, measured + 2 * person_radius),
                      measured + person_radius)
@@ -112,15 +107,12 @@ def beam_ranges(scan: Scan, vis_grid, people: Sequence[Detection], *, max_range:
 
 def seen_points(scan: Scan, stops: np.ndarray, px, py, *, tolerance: float = 1e-6) -> np.ndarray:
     """Which world points the scan saw: in the field of view and no farther than their beam."""
-    x, y, yaw = scan.pose
-    angles = np.asarray(scan.angles, dtype=float)
-    increment = (angles[-1] - angles[0]) / max(len(angles) - 1, 1)
-    dx, dy = np.asarray(px, float) - x, np.asarray(py, float) - y
-    relative = np.mod(np.arctan2(dy, dx) - yaw - angles[0] + increment / 2, 2 * math.pi)
-    beam = np.floor(relative / increment).astype(int) if increment > 0 else np.zeros_like(dx, int)
-    inside = (beam >= 0) & (beam < len(angles))
-    result = np.zeros(np.shape(dx), dtype=bool)
-    result[inside] = np.hypot(dx, dy)[inside] <= stops[beam[inside]] + tolerance
+    x, y, _ = scan.pose
+    beam = beam_indices(scan.pose, scan.angles, px, py)
+    inside = beam >= 0
+    dist = np.hypot(np.asarray(px, dtype=float) - x, np.asarray(py, dtype=float) - y)
+    result = np.zeros(np.shape(dist), dtype=bool)
+    result[inside] = dist[inside] <= stops[beam[inside]] + tolerance
     return result
 
 
