@@ -321,3 +321,24 @@ def test_event_rings_recycle_while_central_is_unreachable(tmp_path):
         wait_until(lambda: robot.recorder.counts()["recycled"] == 10, LONG, what="the ring recycled")
         counts = robot.stop()
         assert counts["event_ring"] == 0 and counts["stored"] == 0 and counts["dropped"] == 0
+
+
+def test_a_trigger_takes_each_rules_window_by_default_clips_before_and_refuses_bad_seconds(tmp_path):
+    rules = parse_upload_rules({"rules": [
+        {"name": "cam", "topics": "^/camera/", "upload": "on_event", "event": {"before": 2.0, "after": 1.0}},
+        {"name": "bump", "topics": "^/bump", "upload": "on_event", "event": {"before": 5.0, "after": 0.5}}]})
+    deferral = Deferral(rules, str(tmp_path / "r.spool"), now=lambda: 100.0).open()
+    try:
+        # 0 (the service's default) and None: each rule's own window around now = 100
+        assert deferral.trigger("a", 0.0, 0.0) == [("cam", 98.0, 101.0), ("bump", 95.0, 100.5)]
+        # before 3 s: cam's ring holds only 2 s (clipped), bump's 5 s; after 4 s in both
+        assert deferral.trigger("b", 3.0, 4.0) == [("cam", 98.0, 104.0), ("bump", 97.0, 104.0)]
+        for before, after in ((-1.0, 0.0), (0.0, float("nan")), (float("inf"), 0.0)):
+            with pytest.raises(ValueError, match="finite number of seconds"):
+                deferral.trigger("bad", before, after)
+        assert [w[2] for w in deferral.rings["cam"].windows] == ["a", "b"]  # nothing kept for "bad"
+    finally:
+        deferral.close()
+    live_only = Deferral(parse_upload_rules({"rules": []}), str(tmp_path / "s.spool")).open()
+    with pytest.raises(ValueError, match="no upload: on_event rule"):
+        live_only.trigger("x")

@@ -5,11 +5,13 @@ recorder is restarted in the middle of the deferral; a local-only topic never re
 on_event topic reaches central only inside the window another node's trigger on ~event keeps.
 The ledger command reads what the recorder saved, and it equals central's counts.
 (The same core runs against the real Apache CouchDB in test_upload_rules.py.)"""
+import shutil
 import subprocess
 import sys
 
 import pytest
 import requests
+import yaml
 from fleet_helpers import FleetRobot, all_docs, messages
 
 from ros_harness import LaunchSet, ManagedProcess, PouchDBServer, RosCore, wait_until
@@ -87,6 +89,15 @@ class RuledRobot(FleetRobot):
         # recorded, uploaded, dropped, recycled, waiting
         return {row[0]: [int(v) for v in row[1:6]] for row in rows}
 
+    def trigger_event(self, request):
+        """Call ~trigger_event (ros_mongo/TriggerEvent) as an operator would: its answer
+        (`rosservice` run by this Python: it imports ros_mongo, whose libraries are in the venv)."""
+        result = subprocess.run([sys.executable, shutil.which("rosservice"), "call",
+                                 "/ros_mongo_server/trigger_event", request],
+                                capture_output=True, text=True, env=self.core.env(), timeout=60)
+        assert result.returncode == 0, result.stderr
+        return yaml.safe_load(result.stdout)
+
 
 @pytest.mark.ros
 @pytest.mark.db
@@ -119,6 +130,15 @@ def test_fleet_launch_holds_images_until_docked_through_a_restart_and_keeps_loca
         wait_until(lambda: central_topics(admin_url).get("/blips", 0) > 0, LONG, interval=0.5,
                    what="the event window")
         trigger.stop()
+        # an operator's service call: its own reason and window, answered with the window kept
+        refused = robot.trigger_event("{reason: typo, before: -1.0}")
+        assert refused["success"] is False and "before" in refused["message"]
+        answer = robot.trigger_event("{reason: operator, before: 0.5, after: 0.2}")
+        assert answer["success"] is True and "blips: keeping" in answer["message"]
+        span = [t["secs"] + t["nsecs"] * 1e-9 for t in (answer["start"], answer["end"])]
+        assert span[1] - span[0] == pytest.approx(0.7, abs=1e-3)
+        wait_until(lambda: any("event:operator" in d["tags"] for d in messages(all_docs(admin_url))),
+                   LONG, interval=0.5, what="the operator's window")
         # the ledger is saved every ~ledger_period (5 s): the images wait on the robot
         wait_until(lambda: robot.saved_ledger().get(CAMERA, [0] * 5)[4] == count // 10, LONG,
                    interval=0.5, what="the ledger shows every image waiting")
@@ -128,7 +148,10 @@ def test_fleet_launch_holds_images_until_docked_through_a_restart_and_keeps_loca
                    what="every image central after docking")
         docs = messages(all_docs(admin_url))
         blipped = [d for d in docs if d["topic"] == "/blips"]
-        assert all("event:bump" in d["tags"] for d in blipped)
+        assert all({"event:bump", "event:operator"} & set(d["tags"]) for d in blipped)
+        assert not any("event:typo" in d["tags"] for d in blipped)   # refused: nothing kept
+        operator = [d["receive_time"] for d in blipped if "event:operator" in d["tags"]]
+        assert span[0] <= min(operator) and max(operator) <= span[1]
         docs = [d for d in docs if d["topic"] != "/blips"]
         ids = [(d["topic"], int(d["msg"]["header"]["frame_id"])) for d in docs]
         assert len(ids) == len(set(ids)) == count + count // 10        # each message once

@@ -88,7 +88,15 @@ class Deferral:
 
     def trigger(self, reason: str, before: Optional[float] = None,
                 after: Optional[float] = None) -> List[Tuple[str, float, float]]:
-        """Keep a window around now in every ring: (rule, start, end) of each."""
+        """Keep a window around now in every ring: (rule, start, end) of each. `before` / `after`
+        None or 0: each rule's own; `before` is at most the rule's (its ring holds no more).
+        ValueError for a negative or non-finite value, or when no rule is on_event."""
+        for name, value in (("before", before), ("after", after)):
+            if value is not None and not 0.0 <= float(value) < float("inf"):
+                raise ValueError(f"event {name} must be a finite number of seconds >= 0, got {value!r}")
+        if not self.rings:
+            raise ValueError("no upload: on_event rule: there is no window to keep")
+        before, after = before or None, after or None
         now = self.now()
         return [(name, *ring.trigger(now, reason, before, after)) for name, ring in self.rings.items()]
 

@@ -10,7 +10,6 @@ from typing import Dict, Optional
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from std_msgs.msg import Header, String
-from std_srvs.srv import Trigger, TriggerResponse
 
 from robot_common.ros_node import ros_home
 from ros_mongo.compat.legacy import legacy_config
@@ -22,6 +21,7 @@ from ros_mongo.recording.deferral import Deferral
 from ros_mongo.recording.ledger import Ledger
 from ros_mongo.recording.recorder import Recorder
 from ros_mongo.recording.upload_rules import docked_from_battery
+from ros_mongo.srv import TriggerEvent, TriggerEventResponse
 from ros_mongo.storage.store import open_store
 
 __all__ = ["RecorderNode", "ORIGINAL_TOPICS", "start"]
@@ -48,8 +48,10 @@ class RecorderNode:
     Subscribes also: the dock topics of the upload rules (std_msgs/Bool or
         sensor_msgs/BatteryState, read by their type); with on_event rules ~event (std_msgs/String:
         the reason; keeps every on_event rule's window around now).
-    Services: with on_event rules ~trigger_event (std_srvs/Trigger: the same, reason "service
-        call"; the message names each window kept).
+    Services: with on_event rules ~trigger_event (ros_mongo/TriggerEvent: reason, before and
+        after seconds, 0 for each rule's own; answers success, a message naming each rule's
+        window, and the kept windows' start and end; a negative or non-finite before / after
+        gets success false and keeps nothing).
     The summary logged at shutdown has the same counts, dropped ones per topic. The ledger is
     saved to <spool_path>.ledger every ~ledger_period and at shutdown (`ros_mongo_bag ledger`).
     """
@@ -102,7 +104,7 @@ class RecorderNode:
                                  for topic in self.rules.dock_topics]
         if self.rules.events:
             self.dock_subscribers.append(rospy.Subscriber("~event", String, self._event_topic))
-            rospy.Service("~trigger_event", Trigger, self._event_service)
+            rospy.Service("~trigger_event", TriggerEvent, self._event_service)
         rospy.loginfo("recording %s into %s (session %s, robot %s, spool %s of at most %.0f MB; when it "
                       "is full the oldest messages of %s go first)", sorted(self.subscribers),
                       self.store.url, self.session_id, self.robot_id, self.recorder.spool.path,
@@ -149,14 +151,24 @@ class RecorderNode:
     def _event_topic(self, msg: String) -> None:
         self._trigger(msg.data or "event")
 
-    def _event_service(self, _request) -> TriggerResponse:
-        return TriggerResponse(success=True, message=self._trigger("service call"))
+    def _event_service(self, request) -> TriggerEventResponse:
+        try:
+            windows, text = self._trigger(request.reason or "service call", request.before, request.after)
+        except ValueError as err:
+            return TriggerEventResponse(success=False, message=str(err))
+        except SpoolError as err:  # the windows file cannot be written: an operator must act
+            rospy.logerr(str(err))
+            return TriggerEventResponse(success=False, message=str(err))
+        return TriggerEventResponse(success=True, message=text,
+                                    start=rospy.Time.from_sec(min(w[1] for w in windows)),
+                                    end=rospy.Time.from_sec(max(w[2] for w in windows)))
 
-    def _trigger(self, reason: str) -> str:
-        windows = self.recorder.deferral.trigger(reason)
+    def _trigger(self, reason: str, before: float = 0.0, after: float = 0.0) -> tuple:
+        """Keep the windows of every on_event rule: ((rule, start, end) of each, a summary)."""
+        windows = self.recorder.deferral.trigger(reason, before, after)
         text = "; ".join(f"{rule}: keeping {start:.3f} to {end:.3f}" for rule, start, end in windows)
         rospy.loginfo("event %r: %s", reason, text)
-        return text
+        return windows, text
 
     def _ledger_now(self) -> dict:
         recorder = self.recorder
