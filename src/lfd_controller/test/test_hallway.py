@@ -41,6 +41,26 @@ def test_feature_derivatives_match_finite_differences():
                                    values.state_hess[..., i], atol=1e-5)
 
 
+def test_the_planning_path_gives_the_reference_features_weighted_values_and_gradients():
+    rng = np.random.default_rng(1)
+    features = HallwayFeatures()
+    task = HallwayTask([2.0, 1.0], [9.0, 0.0], rng.normal(size=(7, 2)), rng.normal(size=(4, 2)),
+                       rng.normal(size=(4, 2)), 0.3)
+    states, actions = rng.normal(size=(12, 5)), rng.normal(size=(12, 2))
+    times = 0.3 + 0.4 * np.arange(12)
+    weights = rng.normal(size=len(features.state_names))
+    weights[[1, 5]] = 0.0           # features of weight 0 are skipped by the fast path
+    control = rng.normal(size=2)
+    slow = features.evaluate(states, actions, times, task, order=1)
+    value, state_grad, action_grad = features.weighted_first_order(states, actions, times, task,
+                                                                   weights, control)
+    np.testing.assert_allclose(value, slow.state @ weights + slow.control @ control, atol=1e-12)
+    np.testing.assert_allclose(state_grad, np.einsum("k,tka->ta", weights, slow.state_jac),
+                               atol=1e-12)
+    np.testing.assert_allclose(action_grad, np.einsum("c,tca->ta", control, slow.control_jac),
+                               atol=1e-12)
+
+
 def test_people_count_only_through_sums_so_any_number_works():
     features = HallwayFeatures()
     state = np.array([[0.0, 0.0, 0.0, 0.5, 0.0]])

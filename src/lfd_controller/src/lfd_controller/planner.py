@@ -463,15 +463,16 @@ class RecedingHorizonController:
             self._still_since = None
         return command
 
-    def act(self, state, t: float, task: Task) -> np.ndarray:
-        """The command to apply now at state (5,) and episode time t."""
+    def act(self, state, t: float, task: Task, *, started: Optional[float] = None) -> np.ndarray:
+        """The command to apply now at state (5,) and episode time t; `started`: the
+        time.perf_counter() at which the cycle began (the budget counts from there; default now)."""
         if self.unstall > 0:
             state = np.asarray(state, float)
-            return self._unstalled(state, t, task, self._act(state, t, task))
-        return self._act(state, t, task)
+            return self._unstalled(state, t, task, self._act(state, t, task, started))
+        return self._act(state, t, task, started)
 
-    def _act(self, state, t: float, task: Task) -> np.ndarray:
-        started = time.perf_counter()
+    def _act(self, state, t: float, task: Task, started: Optional[float] = None) -> np.ndarray:
+        started = time.perf_counter() if started is None else started
         self.steps_ = self.planning_steps(state, task)
         warm = self._warm_start(t)
         candidates = []
