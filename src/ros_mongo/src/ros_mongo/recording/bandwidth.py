@@ -6,30 +6,16 @@ the spool of live topics drained after an outage) waits only while the bucket is
 takes its bytes (possibly into debt): live topics are never held back by deferred data, and their
 long-run rate is the cap. A *deferred* write (a released `upload: when` part) waits until the
 bucket holds its bytes (up to one burst) and no live write is waiting: it gets what live topics
-leave. Bytes are estimated from the messages' sizes (`wire_bytes`).
+leave. The recorder takes the bytes of the encoded documents (base64 bytes, decoded fields,
+document keys: the request bodies), just before it sends them.
 """
 import threading
 import time
 from typing import Callable, Optional
 
 from ros_mongo.errors import StoreUnavailable
-from ros_mongo.storage.chunks import ChunkRecord
 
-__all__ = ["Bandwidth", "wire_bytes"]
-
-#: Bytes a stored message costs on the wire beyond 4/3 of its serialized size (base64 attachments,
-#: decoded fields and document keys; measured on odometry and images within 10 %).
-PER_MESSAGE_BYTES = 600
-
-
-def wire_bytes(records) -> int:
-    """Estimated bytes on the wire of writing `records` (messages or chunks)."""
-    total = 0
-    for record in records:
-        parts = record.records if isinstance(record, ChunkRecord) else [record]
-        total += sum(4 * len(r.raw) // 3 + PER_MESSAGE_BYTES for r in parts)
-    return total
-
+__all__ = ["Bandwidth"]
 
 class Bandwidth:
     """The token bucket (see the module docstring); rate 0 or less: no cap.
