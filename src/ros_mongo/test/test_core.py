@@ -239,6 +239,22 @@ def test_recorder_config_rejects_a_bad_pattern_and_unknown_keys():
         RecorderParams.from_mapping({"batchsize": 10})
 
 
+def test_decode_levels_read_as_the_parameter_server_returns_them_and_chunk_periods_are_checked():
+    # `decode: {nav_msgs/Odometry: index, camera/rgb/image_raw: raw, odom: raw}` as rosparam
+    # returns it: keys holding '/' nested, topics without their leading '/'
+    config = RecorderParams.from_mapping({"decode": {"nav_msgs": {"Odometry": "index"}, "odom": "raw",
+                                                     "camera": {"rgb": {"image_raw": "raw"}}}})
+    policy = config.decode_policy()
+    assert policy.level("/odom", "nav_msgs/Odometry") == "raw"          # the topic's entry wins
+    assert policy.level("/odom_fused", "nav_msgs/Odometry") == "index"  # its type's
+    assert policy.level("/camera/rgb/image_raw", "sensor_msgs/Image") == "raw"
+    assert policy.level("/scan", "sensor_msgs/LaserScan") == "full"     # ~decode_default
+    assert RecorderParams.from_mapping({"chunk_period": 0.25}).chunk_policy().period == 0.25
+    for period in (0.0, 1.5):
+        with pytest.raises(ConfigError, match="chunk period must be above 0 and at most 1.0"):
+            RecorderParams.from_mapping({"chunk_period": period}).chunk_policy()
+
+
 def test_retriever_config_builds_its_query():
     config = RetrieverParams.from_mapping({"topics": ["/odom", "/scan"], "start_time": 5,
                                            "query": "tags lidar"})

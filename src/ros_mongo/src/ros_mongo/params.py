@@ -87,7 +87,8 @@ class RecorderParams(NodeConfig):
                                                             "image/joint_states/lidar/odom)")
     decode: Dict[str, str] = param({}, "per topic or message type: how much is decoded into queryable "
                                        "fields, full | index (no arrays) | raw (none); the bytes are "
-                                       "always stored")
+                                       "always stored (topics without their leading '/': the parameter "
+                                       "server drops such keys)")
     decode_default: str = param("full", "the decode level of topics and types not in ~decode",
                                 choices=DECODE_LEVELS)
     blob_threshold: int = param(262144, "serialized messages larger than this (bytes) go to "
@@ -99,6 +100,8 @@ class RecorderParams(NodeConfig):
     chunk_rate: float = param(0.0, "also chunk every topic once it receives this many messages within "
                                    "one second (0.0: by chunk_topics only)")
     chunk_messages: int = param(1000, "messages per chunk, at most")
+    chunk_period: float = param(1.0, "seconds a chunk stays open at most (0 < chunk_period <= 1.0): "
+                                     "lower delivers chunked topics sooner, in more documents")
     upload_rules: str = param("", "a YAML file of per-topic upload rules (live, when: kept on the robot "
                                   "until docked / a daily window, local: never sent); empty: every "
                                   "topic live. For a recorder writing to central (fleet.launch)")
@@ -132,7 +135,7 @@ class RecorderParams(NodeConfig):
     def decode_policy(self) -> DecodePolicy:
         """The ~decode levels (ConfigError naming a bad one)."""
         try:
-            return DecodePolicy(self.decode, self.decode_default)
+            return DecodePolicy(_flat(self.decode), self.decode_default)
         except ValueError as err:
             raise ConfigError(f"~decode: {err}") from None
 
@@ -140,9 +143,9 @@ class RecorderParams(NodeConfig):
         """Which topics are stored as chunks (ConfigError naming a bad setting)."""
         compile_patterns("chunk_topics", self.chunk_topics)
         try:
-            return ChunkPolicy(self.chunk_topics, self.chunk_rate, self.chunk_messages)
+            return ChunkPolicy(self.chunk_topics, self.chunk_rate, self.chunk_messages, self.chunk_period)
         except ValueError as err:
-            raise ConfigError(f"~chunk_rate / ~chunk_messages: {err}") from None
+            raise ConfigError(f"~chunk_rate / ~chunk_messages / ~chunk_period: {err}") from None
 
     def upload_policy(self) -> "UploadRules":
         """The upload rules of ~upload_rules (ConfigError naming a bad file or value)."""
@@ -331,3 +334,16 @@ class CentralSourceParams(NodeConfig):
             selector["topic"] = {"$in": list(topics)}
         from ros_mongo.fleet.changes import ChangesFollower
         return ChangesFollower(url, selector=selector, since=since)
+
+
+def _flat(levels: dict, prefix: str = "") -> dict:
+    """~decode as the parameter server returns it, flattened: it nests a key holding '/'
+    ({nav_msgs: {Odometry: index}} is nav_msgs/Odometry; {camera: {rgb: ...}} camera/rgb...)."""
+    flat = {}
+    for key, value in levels.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            flat.update(_flat(value, name + "/"))
+        else:
+            flat[name] = value
+    return flat

@@ -24,8 +24,9 @@ _STAMP = struct.Struct("<3I")  # a Header's seq, stamp.secs, stamp.nsecs: the fi
 
 
 class DecodePolicy:
-    """The decode level of each (topic, type): `levels` maps topic names and message types to a
-    level (a topic's entry wins over its type's), anything else gets `default`."""
+    """The decode level of each (topic, type): `levels` maps topic names (with or without their
+    leading '/') and message types to a level (a topic's entry wins over its type's), anything
+    else gets `default`."""
 
     def __init__(self, levels: Optional[Mapping[str, str]] = None, default: str = "full"):
         levels = dict(levels or {})
@@ -40,7 +41,8 @@ class DecodePolicy:
         key = (topic, msg_type)
         level = self._cache.get(key)
         if level is None:
-            level = self.levels.get(topic) or self.levels.get(msg_type) or self.default
+            level = (self.levels.get(topic) or self.levels.get(topic.lstrip("/"))
+                     or self.levels.get(msg_type) or self.default)
             self._cache[key] = level
         return level
 

@@ -1,11 +1,17 @@
 """Which messages go into chunks and when a chunk closes (the recorder's side of chunked topics;
-no ROS). The stored form of a chunk: ros_mongo.storage.chunks."""
+no ROS), and the recorder's queue items: a topic info `(info,)`, a message `(key, raw, secs,
+nsecs)` or a closed `PendingChunk`. The stored form of a chunk: ros_mongo.storage.chunks."""
 import re
 from typing import Dict, List, Sequence
 
-from ros_mongo.storage.chunks import CHUNK_SPAN
+from ros_mongo.storage.chunks import CHUNK_SPAN, ChunkRecord
 
-__all__ = ["ChunkPolicy", "Chunker", "PendingChunk"]
+__all__ = ["ChunkPolicy", "Chunker", "PendingChunk", "ITEM_OVERHEAD", "item_cost", "item_entry",
+           "item_messages"]
+
+#: Bytes a queued message costs beyond its payload (the bytes object, the queue entry, its tuple
+#: and numbers, measured with sys.getsizeof on CPython 3.8-3.11).
+ITEM_OVERHEAD = 200
 
 
 class PendingChunk:
@@ -36,14 +42,15 @@ class PendingChunk:
 class Chunker:
     """Groups the messages of chunked topics into closed `PendingChunk`s: a chunk closes when it
     holds `max_messages`, when a message comes `CHUNK_SPAN` s (receive time) after its first one or
-    before its last one (that message opens the next), and when it has been open `CHUNK_SPAN` s of
-    wall time (`due`). So a chunk's receive times never go back and span less than `CHUNK_SPAN`.
-    Not thread-safe: the recorder calls it under its queue lock."""
+    before its last one (that message opens the next), and when it has been open `period` s of
+    wall time (`due`; at most `CHUNK_SPAN`). So a chunk's receive times never go back and span
+    less than `CHUNK_SPAN`. Not thread-safe: the recorder calls it under its queue lock."""
 
-    def __init__(self, max_messages: int = 1000):
+    def __init__(self, max_messages: int = 1000, period: float = CHUNK_SPAN):
         if max_messages < 1:
             raise ValueError(f"chunk max_messages must be positive, got {max_messages!r}")
-        self.max_messages = int(max_messages)
+        _check_period(period)
+        self.max_messages, self.period = int(max_messages), float(period)
         self.open: Dict[tuple, PendingChunk] = {}
 
     def add(self, key: tuple, raw: bytes, secs: int, nsecs: int, now: float) -> List[PendingChunk]:
@@ -62,8 +69,8 @@ class Chunker:
         return closed
 
     def due(self, now: float) -> List[PendingChunk]:
-        """Chunks open for `CHUNK_SPAN` s or more, closed."""
-        keys = [key for key, chunk in self.open.items() if now - chunk.opened >= CHUNK_SPAN]
+        """Chunks open for `period` s or more, closed."""
+        keys = [key for key, chunk in self.open.items() if now - chunk.opened >= self.period]
         return [self.open.pop(key) for key in keys]
 
     def flush(self) -> List[PendingChunk]:
@@ -75,15 +82,18 @@ class Chunker:
 class ChunkPolicy:
     """Which topics are chunked: names fully matching one of `patterns` (regular expressions), and,
     when `min_rate` > 0, every topic once it received `min_rate` messages within one second of
-    receive time (from then on). `max_messages`: a chunk's size limit. Not thread-safe (the
-    recorder calls it under its queue lock)."""
+    receive time (from then on). `max_messages`: a chunk's size limit; `period`: the wall time a
+    chunk stays open at most (the Chunker's). Not thread-safe (the recorder calls it under its
+    queue lock)."""
 
-    def __init__(self, patterns: Sequence[str] = (), min_rate: float = 0.0, max_messages: int = 1000):
+    def __init__(self, patterns: Sequence[str] = (), min_rate: float = 0.0, max_messages: int = 1000,
+                 period: float = CHUNK_SPAN):
         if min_rate < 0 or max_messages < 1:
             raise ValueError(f"chunk rate must not be negative and max messages must be positive, got "
                              f"{min_rate!r} and {max_messages!r}")
+        _check_period(period)
         self.patterns = [re.compile(p) for p in patterns]
-        self.min_rate, self.max_messages = float(min_rate), int(max_messages)
+        self.min_rate, self.max_messages, self.period = float(min_rate), int(max_messages), float(period)
         self._decided: Dict[str, bool] = {}
         self._windows: Dict[str, List[float]] = {}   # topic -> [window start, messages in it]
 
@@ -107,3 +117,32 @@ class ChunkPolicy:
             self._decided[topic] = True
             return True
         return False
+
+
+def _check_period(period: float) -> None:
+    if not 0.0 < float(period) <= CHUNK_SPAN:
+        raise ValueError(f"chunk period must be above 0 and at most {CHUNK_SPAN} s (what readers "
+                         f"allow for a chunk), got {period!r}")
+
+
+def item_messages(item) -> int:
+    """Messages a queue item holds (a topic info: 0)."""
+    if isinstance(item, PendingChunk):
+        return len(item)
+    return 0 if len(item) == 1 else 1
+
+
+def item_cost(item) -> int:
+    """Bytes a queue item counts for in the recorder's `max_queue_bytes`."""
+    if isinstance(item, PendingChunk):
+        return item.nbytes + ITEM_OVERHEAD * len(item)
+    return 0 if len(item) == 1 else len(item[1]) + ITEM_OVERHEAD
+
+
+def item_entry(item, build):
+    """The entry of a queue item: its topic info, or `build(key, raw, secs, nsecs)`'s record of
+    its message, or a ChunkRecord of its messages' records."""
+    if isinstance(item, PendingChunk):
+        return ChunkRecord([build(item.key, raw, secs, nsecs)
+                            for raw, secs, nsecs in zip(item.raws, item.secs, item.nsecs)])
+    return item[0] if len(item) == 1 else build(*item)

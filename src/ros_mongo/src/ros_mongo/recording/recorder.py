@@ -36,31 +36,39 @@ from typing import Deque, Dict, List, Optional, Sequence, Tuple, Union
 
 import genpy
 
-from ros_mongo.errors import DocumentsRejected, SpoolError, StoreError
+from ros_mongo.errors import SpoolError, StoreError
 from ros_mongo.messages.decoding import DecodePolicy
-from ros_mongo.recording.bandwidth import Bandwidth, wire_bytes
+from ros_mongo.recording.bandwidth import Bandwidth
 from ros_mongo.recording.bounded_spool import BoundedSpool
-from ros_mongo.recording.chunker import Chunker, ChunkPolicy, PendingChunk
+from ros_mongo.recording.chunker import (
+    ITEM_OVERHEAD,
+    Chunker,
+    ChunkPolicy,
+    PendingChunk,
+    item_cost,
+    item_entry,
+    item_messages,
+)
 from ros_mongo.recording.deferral import Deferral, DeferredPart
 from ros_mongo.recording.events import EventRing
 from ros_mongo.recording.quarantine import Quarantine
 from ros_mongo.recording.record_builder import Key as _Key
 from ros_mongo.recording.record_builder import RecordBuilder
-from ros_mongo.records import MessageRecord, TopicInfo
-from ros_mongo.storage.chunks import ChunkRecord, message_count
+from ros_mongo.recording.store_writer import StoreWriter
+from ros_mongo.recording.tally import Tally
+from ros_mongo.records import TopicInfo
+from ros_mongo.storage.chunks import message_count
 from ros_mongo.storage.store import MessageStore
 
 __all__ = ["Recorder", "ITEM_OVERHEAD"]
 
 log = logging.getLogger(__name__)
 
-#: Bytes a queued message costs beyond its payload (the bytes object, the queue entry, its tuple
-#: and numbers, measured with sys.getsizeof on CPython 3.8-3.11).
-ITEM_OVERHEAD = 200
-COUNTERS = ("received", "stored", "dropped", "rejected", "quarantined", "spooled", "writer_restarts",
-            "deferred", "released")
 #: Bytes of a deferred part read per write while releasing it (small: live batches go between).
 RELEASE_BYTES = 4 * 1024 * 1024
+#: Seconds an idle writer sleeps (nothing queued, no chunk open) unless a message arrives: the
+#: housekeeping period (event windows decided, deferred parts released, a failing store probed).
+IDLE_PERIOD = 1.0
 
 
 class Recorder:
@@ -102,9 +110,9 @@ class Recorder:
         self.writers = int(writers)
         self.store, self.spool, self.deferral = store, spool, deferral
         self.bandwidth = bandwidth if bandwidth is not None and bandwidth.active else None
-        self.uploaded: Dict[str, int] = {}  # messages stored per topic (this process)
         self.quarantine = Quarantine(quarantine_path or str(spool.path) + ".quarantine",
                                      min_free_bytes=0)
+        self.tally = Tally()
         self.batch_size, self.batch_period = int(batch_size), float(batch_period)
         self.max_queue_bytes, self.retry_period = int(max_queue_bytes), float(retry_period)
         self._cond = threading.Condition()
@@ -112,6 +120,8 @@ class Recorder:
         self._queued_bytes = 0
         self._queued_messages = 0   # in the queue or in open chunks
         self._topics: Dict[_Key, TopicInfo] = {}
+        self.writer = StoreWriter(store, self._topics, self.tally, self.quarantine, self.bandwidth,
+                                  self._drop)
         self.records = RecordBuilder(self._topics, decode=decode or DecodePolicy(), tags=tags,
                                      topic_tags=topic_tags, session_id=session_id, robot_id=robot_id,
                                      author=author, max_array_len=store.max_array_len)
@@ -120,21 +130,18 @@ class Recorder:
             log.warning("%s stores no chunks: every message is stored as a document of its own",
                         store.backend_title)
             self.chunks = None
-        self._chunker = Chunker(self.chunks.max_messages if self.chunks else 1)
+        self._chunker = Chunker(self.chunks.max_messages, self.chunks.period) if self.chunks else Chunker(1)
         self._stopping = False
+        self._idle = 0          # writers sleeping with nothing queued (a message wakes one)
         self._deadline = float("inf")
         self._threads: List[threading.Thread] = []
-        self._count_lock = threading.Lock()
         self._spill_lock = threading.Lock()
-        self._dropped_topics: Dict[str, int] = {}
-        self._drop_reasons: Dict[str, str] = {}  # the latest reason per topic
         self._order = threading.Condition()
         self._tickets = 0       # batches taken
         self._turn = 0          # the batch whose turn it is to be written
         self.db_ok, self._next_probe, self._failures = True, 0.0, 0
         self.fault = ""         # the current fault (the server's reason), "" when writes work
         self.last_fault = ""    # the latest fault, kept after it cleared
-        self._counts: Dict[str, int] = dict.fromkeys(COUNTERS, 0)
 
     # -- called from subscriber threads -----------------------------------------------------------
     def receive(self, topic: str, raw: bytes, receive: genpy.Time, msg_type: str, md5sum: str,
@@ -144,7 +151,7 @@ class Recorder:
         cost = len(raw) + ITEM_OVERHEAD
         part = self.deferral.target_for(topic) if self.deferral is not None else None
         with self._cond:
-            self._counts["received"] += 1      # one key, only ever written under _cond
+            self.tally.counts["received"] += 1  # one key, only ever written under _cond
             if key not in self._topics:
                 info = TopicInfo(topic, msg_type, md5sum, definition, bool(latching), callerid,
                                  self.records.robot_id or "")
@@ -159,7 +166,7 @@ class Recorder:
                                                          time.monotonic()))
                 else:
                     self._queue.append((key, raw, receive.secs, receive.nsecs))
-                if len(self._queue) >= self.batch_size:
+                if len(self._queue) >= self.batch_size or self._idle:
                     self._cond.notify()
                 return True
         if part is not None:
@@ -194,8 +201,7 @@ class Recorder:
         """received, stored, dropped (by the recorder when memory and spool were both exhausted,
         plus by the spool's policy when full), rejected, quarantined, spooled (ever), spool_pending,
         queued, queued_bytes, writer_restarts."""
-        with self._count_lock:
-            counts = dict(self._counts)
+        counts = self.tally.snapshot()[0]
         counts["dropped"] += self.spool.dropped_total()
         counts.update(spool_pending=self.spool.pending_records, queued=self._queued_messages,
                       queued_bytes=self._queued_bytes)
@@ -208,8 +214,7 @@ class Recorder:
 
     def dropped_by_topic(self) -> Dict[str, int]:
         """Messages dropped per topic (memory and spool exhausted, or the spool's policy)."""
-        with self._count_lock:
-            dropped = dict(self._dropped_topics)
+        dropped = self.tally.snapshot()[1]
         policy_drops = [self.spool.dropped] + ([self.deferral.dropped()] if self.deferral else [])
         for counts in policy_drops:
             for topic, count in dict(counts).items():
@@ -218,23 +223,17 @@ class Recorder:
 
     def drop_reasons(self) -> Dict[str, str]:
         """The latest reason per topic that lost messages."""
-        with self._count_lock:
-            reasons = dict(self._drop_reasons)
+        reasons = self.tally.snapshot()[2]
         for topic in self.dropped_by_topic():
             reasons.setdefault(topic, "spool full: the oldest messages of droppable topics go first")
         return reasons
 
     def uploaded_by_topic(self) -> Dict[str, int]:
         """Messages stored in the database per topic (this process)."""
-        with self._count_lock:
-            return dict(self.uploaded)
+        return self.tally.snapshot()[3]
 
     def _drop(self, per_topic: Dict[str, int], why: str) -> None:
-        with self._count_lock:
-            for topic, count in per_topic.items():
-                self._counts["dropped"] += count
-                self._dropped_topics[topic] = self._dropped_topics.get(topic, 0) + count
-                self._drop_reasons[topic] = why
+        self.tally.drop(per_topic, why)
         total = sum(per_topic.values())
         self._set_fault(f"dropped {total} messages ({why})")
         log.error("dropped %d messages %s: %s", total, per_topic, why)
@@ -298,6 +297,10 @@ class Recorder:
 
     def _take(self) -> Tuple[List[tuple], Optional[int]]:
         with self._cond:
+            if not self._queue and not self._chunker.open and not self._stopping:
+                self._idle += 1  # until a message arrives (receive notifies) or housekeeping is due
+                self._cond.wait(IDLE_PERIOD if self.db_ok else min(IDLE_PERIOD, self.retry_period))
+                self._idle -= 1
             deadline = time.monotonic() + self.batch_period
             while len(self._queue) < self.batch_size and not self._stopping:
                 remaining = deadline - time.monotonic()
@@ -311,8 +314,8 @@ class Recorder:
             while self._queue and count < self.batch_size and size < 32 * 1024 * 1024:
                 item = self._queue.popleft()
                 items.append(item)
-                count += _messages(item)
-                size += _cost(item)
+                count += item_messages(item)
+                size += item_cost(item)
             self._queued_bytes -= size
             self._queued_messages -= count
             if not items:
@@ -324,11 +327,11 @@ class Recorder:
     def _write(self, items: List[tuple], ticket: int) -> None:
         """Decode (in parallel with other writers), then write in ticket order."""
         try:
-            entries = [self._entry(item, self.records.record) for item in items]
+            entries = [item_entry(item, self.records.record) for item in items]
         except Exception as err:  # noqa: BLE001 - a decoding bug must not lose the batch
             log.exception("cannot decode a batch; storing it without decoded fields")
             self._set_fault(f"decoding failed: {type(err).__name__}: {err}")
-            entries = [self._entry(item, self.records.raw) for item in items]
+            entries = [item_entry(item, self.records.raw) for item in items]
         with self._order:
             while self._turn != ticket:
                 self._order.wait()
@@ -338,14 +341,6 @@ class Recorder:
             with self._order:
                 self._turn += 1
                 self._order.notify_all()
-
-    @staticmethod
-    def _entry(item, build):
-        """The entry of a queue item: a topic info, a message's record or a chunk's."""
-        if isinstance(item, PendingChunk):
-            return ChunkRecord([build(item.key, raw, secs, nsecs)
-                                for raw, secs, nsecs in zip(item.raws, item.secs, item.nsecs)])
-        return item[0] if len(item) == 1 else build(*item)
 
     def _write_in_turn(self, entries: list, items: List[tuple]) -> None:
         unexpected = None
@@ -373,14 +368,14 @@ class Recorder:
 
     def _keep_in_memory(self, items: List[tuple], err: SpoolError) -> None:
         """The spool is full: back to the front of the queue while memory lasts, else dropped."""
-        size = sum(_cost(item) for item in items)
+        size = sum(item_cost(item) for item in items)
         with self._cond:
             # stopping: kept (and retried) until the stop's deadline, as the server may be back
             if (self._queued_bytes + size <= self.max_queue_bytes
                     and (not self._stopping or time.monotonic() < self._deadline)):
                 self._queue.extendleft(reversed(items))
                 self._queued_bytes += size
-                self._queued_messages += sum(_messages(item) for item in items)
+                self._queued_messages += sum(item_messages(item) for item in items)
                 kept = True
             else:
                 kept = False
@@ -390,71 +385,16 @@ class Recorder:
         else:
             per_topic: Dict[str, int] = {}
             for item in items:
-                if _messages(item):
+                if item_messages(item):
                     topic = item.key[0] if isinstance(item, PendingChunk) else item[0][0]
-                    per_topic[topic] = per_topic.get(topic, 0) + _messages(item)
+                    per_topic[topic] = per_topic.get(topic, 0) + item_messages(item)
             self._drop(per_topic, f"memory and spool both exhausted: {err}")
 
     def _add(self, counter: str, value: int) -> None:
-        with self._count_lock:
-            self._counts[counter] += value
+        self.tally.add(counter, value)
 
     def _store(self, entries: list, live: bool = True) -> None:
-        """Store entries; documents refused on their own merits go to the quarantine file. Any
-        other StoreError propagates (nothing was lost: ids dedupe the retry)."""
-        records = [e for e in entries if isinstance(e, (MessageRecord, ChunkRecord))]
-        for entry in entries:
-            if isinstance(entry, TopicInfo):
-                self.store.put_topic(entry)
-        for key in {(r.topic, r.msg_type, r.md5sum, r.callerid) for r in records}:
-            if key in self._topics:  # each topic's definition before its messages
-                self.store.put_topic(self._topics[key])
-        if self.bandwidth is not None:
-            self.bandwidth.take(wire_bytes(records), live=live, deadline=self._deadline)
-        try:
-            self.store.insert_records(records)
-        except DocumentsRejected as err:
-            refused = [r for r in records if r.id in err.rejected_ids]
-            if len(refused) != err.rejected:  # the server did not name them all: one at a time
-                refused = [r for r in records if not self._insert_alone(r)]
-            self._quarantine(refused, err)
-            self._count_stored(records, refused)
-            return
-        # counted once: a failed attempt that reached the database anyway was not counted
-        self._count_stored(records, ())
-
-    def _count_stored(self, records: list, refused: list) -> None:
-        skip = {id(r) for r in refused}
-        with self._count_lock:
-            for record in records:
-                if id(record) not in skip:
-                    count = message_count(record)
-                    topic = record.records[0].topic if isinstance(record, ChunkRecord) else record.topic
-                    self._counts["stored"] += count
-                    self.uploaded[topic] = self.uploaded.get(topic, 0) + count
-
-    def _insert_alone(self, record: MessageRecord) -> bool:
-        try:
-            self.store.insert_records([record])
-            return True
-        except DocumentsRejected:
-            return False
-
-    def _quarantine(self, refused: List[MessageRecord], err: DocumentsRejected) -> None:
-        count = sum(map(message_count, refused))
-        self._add("rejected", count)
-        try:
-            self.quarantine.add(refused, self._topics)
-        except SpoolError as error:
-            per_topic: Dict[str, int] = {}
-            for record in refused:
-                per_topic[record.topic] = per_topic.get(record.topic, 0) + message_count(record)
-            self._drop(per_topic, f"refused by the database and the quarantine file cannot be "
-                                  f"written: {error}")
-            return
-        self._add("quarantined", count)
-        log.error("the database refused %d messages on their own merits (kept in %s): %s", count,
-                  self.quarantine.path, err)
+        self.writer.write(entries, live=live, deadline=self._deadline)
 
     # -- faults ----------------------------------------------------------------------------------
     def _set_fault(self, text: str) -> None:
@@ -535,16 +475,3 @@ class Recorder:
             log.info("spool %s drained", spool.path)
         return records
 
-
-def _messages(item) -> int:
-    """Messages a queue item holds (a topic info: 0)."""
-    if isinstance(item, PendingChunk):
-        return len(item)
-    return 0 if len(item) == 1 else 1
-
-
-def _cost(item) -> int:
-    """Bytes a queue item counts for in `max_queue_bytes`."""
-    if isinstance(item, PendingChunk):
-        return item.nbytes + ITEM_OVERHEAD * len(item)
-    return 0 if len(item) == 1 else len(item[1]) + ITEM_OVERHEAD
