@@ -116,13 +116,23 @@ def test_the_controller_stops_for_what_the_scan_shows_inside_its_margin_and_repo
                                    settings=dict(HALLWAY_DRIVING, max_iter=2, seed_iter=1))
     angles = np.linspace(-math.pi, math.pi, 36, endpoint=False)
     ranges = np.full(36, 5.0)
-    ranges[18] = 0.2                    # straight ahead, inside 0.18 + 0.05 m
+    ranges[[0, 18]] = 0.2               # behind and straight ahead, inside 0.18 + 0.05 m
     state = np.array([1.0, 1.3, 0.0, 0.0, 0.0])
     command = controller.act(state, 0.0, angles, ranges, np.zeros((0, 2)), np.zeros((0, 2)))
-    assert command.tolist() == [0.0, 0.0] and controller.status_.startswith("stopped: scan 0.20 m")
+    assert command[0] == 0.0 and controller.status_.startswith("stopped: scan 0.20 m")
     for t in np.arange(0.1, 21.0, 1.0):
         command = controller.act(state, t, angles, ranges, np.zeros((0, 2)), np.zeros((0, 2)))
     assert command.tolist() == [0.0, 0.0] and controller.status_.startswith("blocked: held up")
+
+
+def test_what_stands_close_behind_or_beside_does_not_stop_the_robot_driving_on():
+    controller = HallwayController(straight_reward(), corridor().path, Unicycle(0.1), budget=None)
+    angles = np.linspace(-math.pi, math.pi, 36, endpoint=False)
+    ranges = np.full(36, 5.0)
+    ranges[[0, 9, 27]] = 0.2            # behind, right beside and left beside: 0.2 m < 0.23 m
+    state = np.array([1.0, 1.3, 0.0, 0.3, 0.0])
+    command = controller.act(state, 0.0, angles, ranges, np.zeros((0, 2)), np.zeros((0, 2)))
+    assert command[0] > 0.1 and controller.status_ == "following"
 
 
 def test_the_acceptance_check_refuses_only_failing_where_the_person_succeeded():

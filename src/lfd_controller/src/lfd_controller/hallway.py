@@ -4,7 +4,8 @@
 waypoint along the path (`PathFollower`), builds a `HallwayTask` from the scan and the tracked
 people, plans with the reward plus a fixed barrier around every scan point and person
 (`HallwayBarrier`: the demonstrations never show what touching costs) and returns the first
-command - or zero when the scan shows anything inside its safety margin, saying why
+command - or, when moving on would bring the scan inside its safety margin, a zero speed
+(turning in place: a round robot touches nothing that way), saying why
 (`status_`); a robot held up longer than `blocked_after` seconds reports the path blocked and
 stays stopped. Learning (`fit_hallway_reward`) is CIOC over the same tasks, built from the
 demonstrations' own scans and tracked people at the start of each 4 s window, then an
@@ -45,9 +46,9 @@ __all__ = ["HALLWAY_DRIVING", "HALLWAY_SAFETY", "room_margin", "TaskBuilder", "H
 # constant-velocity prediction is not worth more), warm start + one turning or detour seed per
 # cycle (detours 0.9 m beside what blocks the way to the waypoint; after 2 s standing in front
 # of something static, a detour past it: planner.RecedingHorizonController's unstall),
-# discount 0.97, a barrier 0.1 m beyond touching, a safety stop (zero command) when the scan
-# shows anything within 0.05 m of the robot's edge, the path reported blocked after 20 s held up, the
-# local waypoint 4 m ahead on the path or the furthest point up to there in the scan's sight
+# discount 0.97, a barrier 0.1 m beyond touching, a safety stop (zero speed; turning in place
+# allowed) when moving on would bring the scan within 0.05 m of the robot's edge, the path
+# reported blocked after 20 s held up, the local waypoint 4 m ahead on the path or the furthest point up to there in the scan's sight
 # (further than a 4 s window or the look-ahead travels: a waypoint passed inside a window
 # turns its progress feature around).
 HALLWAY_DRIVING = {"horizon": 12, "plan_dt": 0.4, "terminal": 0.0, "spread_seeds": True,
@@ -56,6 +57,9 @@ HALLWAY_DRIVING = {"horizon": 12, "plan_dt": 0.4, "terminal": 0.0, "spread_seeds
 HALLWAY_SAFETY = {"robot_radius": 0.18, "person_radius": 0.25, "barrier_margin": 0.1,
                   "stop_margin": 0.05, "blocked_after": 20.0, "lookahead": 4.0}
 WINDOW, STRIDE = 40, 20
+# The safety stop looks this far (m) along the command beyond the stopping distance, and lets
+# through moves that bring a point inside its margin no more than this much (m) closer.
+STOP_LOOK, STOP_SLACK = 0.05, 0.01
 # Share of the cycle budget, counted from the cycle's start (the task from the scan and people
 # included), after which the planner starts nothing new; the rest is headroom for a busy machine
 # (on 2 shared cores a cycle can lose tens of ms to other processes).
@@ -180,7 +184,7 @@ class HallwayController:
         started = time.perf_counter()
         task = self.task(state, t, angles, ranges, people, velocities)
         command = self.planner.act(state, t, task, started=started)
-        reason = self._too_close(angles, ranges, state[3])
+        reason = self._too_close(angles, ranges, state[3], command)
         moving = abs(state[3]) > 0.05 or abs(command[0]) > 0.05
         if reason is None and moving:
             self.held_since_, self.status_ = None, "following"
@@ -190,32 +194,40 @@ class HallwayController:
             self.status_ = (f"blocked: held up {t - self.held_since_:.0f} s at "
                             f"{self.follower.progress:.1f} of {self.follower.length:.1f} m")
             return np.zeros(2)
-        if reason is not None:
+        if reason is not None:      # no way on: it may still turn in place (round robot)
             self.status_ = f"stopped: {reason}"
-            return np.zeros(2)
+            return np.array([0.0, float(command[1])])
         self.status_ = "waiting"
         return command
 
-    def _too_close(self, angles, ranges, speed: float) -> Optional[str]:
-        """Why the scan forbids moving, or None: anything within the safety margin of the
-        robot's edge, or - on the side it is driving to - within the margin plus the distance it
-        needs to stop (one cycle at its speed plus braking at the acceleration limit)."""
+    def _too_close(self, angles, ranges, speed: float, command) -> Optional[str]:
+        """Why the scan forbids the command, or None: moving straight on (the way of its speed
+        for the distance it needs to stop - one cycle at its speed plus braking at the
+        acceleration limit - and the way of its command for STOP_LOOK m) would bring a scan
+        point within the safety margin of the robot's edge, and more than STOP_SLACK m closer
+        than it is. Turning in place moves a round robot nowhere, and what is behind or beside
+        does not hold it: moving away from someone who stands close is how it gets free."""
         ranges, angles = np.asarray(ranges, float), np.asarray(angles, float)
         limit = self.safety["robot_radius"] + self.safety["stop_margin"]
         finite = np.where(np.isfinite(ranges), ranges, np.inf)
         with np.errstate(invalid="ignore"):     # distances from the base (the laser is ahead)
             along = self.laser_offset + finite * np.cos(angles)
-            distance = np.hypot(along, finite * np.sin(angles))
+            lateral = np.abs(finite * np.sin(angles))
+            distance = np.hypot(along, lateral)
         moving = abs(float(speed))
         stopping = moving * 0.1 + moving ** 2 / (2.0 * self.model.limits.a_max)
-        ahead = np.sign(speed) * along > 0.0
-        reach = np.where(ahead, limit + stopping, limit)
-        close = distance < reach
+        closest = distance
+        for velocity, stretch in ((float(speed), stopping + STOP_LOOK), (float(command[0]), STOP_LOOK)):
+            if abs(velocity) > 0.01:
+                ahead = np.sign(velocity) * along
+                passing = np.where(ahead < stretch, lateral, np.hypot(ahead - stretch, lateral))
+                closest = np.minimum(closest, np.where(ahead > 0.0, passing, distance))
+        close = (closest < limit) & (distance - closest > STOP_SLACK)
         if not close.any():
             return None
-        nearest = int(np.argmin(np.where(close, distance, np.inf)))
-        return (f"scan {distance[nearest]:.2f} m at {math.degrees(angles[nearest]):.0f} deg inside "
-                f"the {reach[nearest]:.2f} m safety margin")
+        nearest = int(np.argmin(np.where(close, closest, np.inf)))
+        return (f"scan {distance[nearest]:.2f} m at {math.degrees(angles[nearest]):.0f} deg, "
+                f"{closest[nearest]:.2f} m ahead: inside the {limit:.2f} m safety margin")
 
 
 @dataclass
