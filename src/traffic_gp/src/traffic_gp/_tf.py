@@ -20,14 +20,16 @@ def libs() -> SimpleNamespace:
     """tensorflow (`tf`), `gpflow`, and `Adam` (a Keras-2 optimiser class), imported once;
     GPflow's default float is then float64.
 
-    Threads: `TRAFFIC_GP_TF_THREADS` (default: up to 2, the cores of our robots' computers) for
-    work inside one operation, one thread between operations.
+    Threads: `TRAFFIC_GP_TF_THREADS` (else TensorFlow's own `TF_NUM_INTRAOP_THREADS`, else up to
+    2, the cores of our robots' computers) for work inside one operation, one thread between
+    operations.
     """
     if not _LIBS:
         os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
         import tensorflow as tf
 
-        threads = int(os.environ.get("TRAFFIC_GP_TF_THREADS", min(2, os.cpu_count() or 1)))
+        threads = int(os.environ.get("TRAFFIC_GP_TF_THREADS")
+                      or os.environ.get("TF_NUM_INTRAOP_THREADS") or min(2, os.cpu_count() or 1))
         try:
             tf.config.threading.set_intra_op_parallelism_threads(threads)
             tf.config.threading.set_inter_op_parallelism_threads(1)
