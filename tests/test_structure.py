@@ -9,10 +9,11 @@
 - Every generated parameter file in a package's config/ matches its NodeConfig class.
 """
 import ast
+import functools
 import xml.etree.ElementTree as ElementTree
 from collections import defaultdict
 from pathlib import Path
-from typing import Dict, List, Set, Tuple
+from typing import Dict, FrozenSet, List, Set, Tuple
 
 import pytest
 
@@ -60,8 +61,16 @@ def _code_files(src: Path = SRC) -> List[Tuple[str, Path, str]]:
 
 
 def _imports(path: Path) -> Set[str]:
-    """Every module name imported anywhere in the file (absolute imports; relative ones resolved)."""
-    tree = ast.parse(path.read_text(), filename=str(path))
+    """Every module name imported anywhere in the file (absolute imports; relative ones resolved).
+    Each version of a file is parsed once: every check reads the same files."""
+    stat = path.stat()
+    return set(_parsed_imports(str(path), stat.st_mtime_ns, stat.st_size))
+
+
+@functools.lru_cache(maxsize=None)
+def _parsed_imports(path: str, mtime_ns: int, size: int) -> FrozenSet[str]:
+    """`_imports` of the file at `path` as it is at (`mtime_ns`, `size`)."""
+    tree = ast.parse(Path(path).read_text(), filename=path)
     names = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
@@ -71,7 +80,7 @@ def _imports(path: Path) -> Set[str]:
                 raise AssertionError(f"{path}: relative import; the workspace uses absolute imports")
             names.add(node.module or "")
             names.update(f"{node.module}.{alias.name}" for alias in node.names)
-    return names
+    return frozenset(names)
 
 
 def _workspace_targets(names: Set[str], modules: Dict[str, Tuple[str, Path]], src: Path = SRC):
