@@ -46,6 +46,21 @@ def test_the_crowd_holds_the_people_model_s_expected_count_over_time():
     assert len(names) == pytest.approx(expected * 21, rel=0.1)
 
 
+def test_after_a_long_gap_the_crowd_is_the_stationary_one_again():
+    """A robot stopping here now and again an hour later meets the model's crowd both times, not
+    an hour's arrivals piled up."""
+    sim = open_room()
+    crowd = Crowd(sim, seed=4)
+    hours = 14.0
+    expected = sim.expected_count(hours)[0].sum()
+    sizes = []
+    for stop in range(200):                              # a stop every hour, same time of day
+        crowd.advance(3600.0 * stop, hours)
+        sizes.append(crowd.names.size)
+    # the mean of 200 Poisson(expected) draws: within 5 standard errors
+    assert abs(np.mean(sizes) - expected) < 5 * math.sqrt(expected / len(sizes))
+
+
 def test_a_perfect_tracker_reports_the_people_the_laser_sees_and_no_one_else():
     sim = open_room()
     crowd = Crowd(sim, seed=1)

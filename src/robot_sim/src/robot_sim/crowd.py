@@ -58,7 +58,9 @@ class Crowd:
             elapsed = now - self.now
             stay = self.rng.random(self.names.size) < math.exp(-elapsed / self.sim.dwell_time)
             self.cell, self.xy, self.names = self.cell[stay], self.xy[stay], self.names[stay]
-            self._arrive(self.rng.poisson(mean * elapsed / self.sim.dwell_time))
+            # those who arrived meanwhile and are still there (exact for any step: a long gap
+            # gives the stationary crowd again, not the arrivals of the whole gap)
+            self._arrive(self.rng.poisson(mean * -math.expm1(-elapsed / self.sim.dwell_time)))
         self.now = now if self.now is None else max(now, self.now)
 
     def _arrive(self, per_cell: np.ndarray) -> None:

@@ -139,7 +139,7 @@ class PeopleSimulator:
             raise SimError(f"bad observation request: n_views={n_views} robots={robots} "
                            f"hours={hours} radius={radius}")
         times = np.sort(start + self.rng.uniform(0.0, hours, n_views))
-        places = self._random_places(n_views, hall_share)
+        places = self.random_places(n_views, hall_share)
         views = []
         iterator = range(n_views)
         if progress:
@@ -154,7 +154,8 @@ class PeopleSimulator:
                               float(duration), cells, fractions, self.rng.poisson(mean)))
         return views
 
-    def _random_places(self, n: int, hall_share: float) -> np.ndarray:
+    def random_places(self, n: int, hall_share: float = 0.8) -> np.ndarray:
+        """`n` places (x, y): `hall_share` of them in hall cells, the rest in any cell."""
         halls = np.nonzero(self.layout.hall >= 0)[0]
         pool_all = np.arange(self.cells.n_cells)
         in_hall = self.rng.random(n) < hall_share if halls.size else np.zeros(n, bool)
