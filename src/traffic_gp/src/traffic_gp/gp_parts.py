@@ -210,7 +210,7 @@ class Trainer:
         lib = libs()
         tf, gpflow = lib.tf, lib.gpflow
         self._tf = tf
-        self.model = model
+        self.model, self.compiled = model, compiled
         gpflow.set_trainable(model.q_mu, False)
         gpflow.set_trainable(model.q_sqrt, False)
         self.gamma = tf.Variable(gamma, dtype=FLOAT, trainable=False)
@@ -228,6 +228,13 @@ class Trainer:
         else:       # eager: the arrays become tensors of the same types as the signature's
             functions = [_as_tensors(tf, f) for f in functions]
         self.step, self.elbo, self.log_density = functions
+
+    def trace(self) -> None:
+        """Trace the compiled functions now (seconds of CPU; nothing is trained), so that the
+        first training step after this does not pay for it."""
+        if self.compiled:
+            for function in (self.step, self.elbo, self.log_density):
+                function.get_concrete_function()
 
     def _step(self, X, Y):
         model = self.model

@@ -28,6 +28,7 @@ from traffic_gp.model import SETTINGS, TrafficGP
 from traffic_gp.observations import Observations
 from traffic_gp.posterior import PosteriorSnapshot
 from traffic_gp.quick import BaselineForecast
+from traffic_gp.training import COMPILE_STEPS
 
 log = logging.getLogger(__name__)
 
@@ -97,9 +98,7 @@ class Learner:
             log.info("serving the baselines at once: %s", quick.status())
             return True
         if isinstance(self.model, PosteriorSnapshot):     # first new rows after loading a file
-            trainable = TrafficGP.load(self.model.path)
-            with self.lock:
-                self.model = trainable
+            self._make_trainable()
         if self.job is not None:
             self.job.later.append(rows)
         with self.lock:
@@ -107,11 +106,15 @@ class Learner:
             commit()
         return True
 
-    def step(self, cells, stop: threading.Event, trained: bool) -> None:
+    def step(self, cells, stop: threading.Event, trained: bool, rows_coming: bool = False) -> None:
         """Swap in a finished job's model, start the jobs the growth asks for and, after new
-        rows (`trained`), train the served GP a little (`online_steps`, in chunks)."""
+        rows (`trained`), train the served GP a little (`online_steps`, in chunks). A model
+        served from a file is made trainable here once rows are coming (a source is connected),
+        so that the first rows are taken in without waiting for TensorFlow."""
         if self.job is not None and self.job.done():
             self._finish()
+        if isinstance(self.model, PosteriorSnapshot) and rows_coming:
+            self._make_trainable()
         if self.model is None or isinstance(self.model, PosteriorSnapshot):
             return
         if self.job is None:
@@ -125,6 +128,21 @@ class Learner:
             with self.lock:
                 self.model.partial_fit(Observations.empty(),
                                        n_steps=min(self.chunk_steps, steps - done))
+
+    def _make_trainable(self) -> None:
+        """Replace the served file's posterior by the trainable model of the same file (the
+        same answers), loaded and made ready to train outside the lock."""
+        trainable = TrafficGP.load(self.model.path)
+        self._ready_to_train(trainable)
+        with self.lock:
+            self.model = trainable
+
+    @staticmethod
+    def _ready_to_train(model) -> None:
+        """Rounds of `online_steps` steps go on for the node's life, in short chunks: a
+        compiled step when a round is long enough to pay for tracing it (COMPILE_STEPS)."""
+        if isinstance(model, TrafficGP) and model.online_steps >= COMPILE_STEPS:
+            model.prepare_training()
 
     def _grow(self, cells) -> None:
         rows = self.model.n_rows_
@@ -148,6 +166,7 @@ class Learner:
 
         def fit() -> TrafficGP:
             model = self._fit_gp(params, rows, cells, warm)
+            self._ready_to_train(model)
             if kind == "refit" and chosen.get("reason"):
                 model.selection_ = dict(chosen, reason=f"refitted on {len(rows)} rows, warm, "
                                                        f"with the settings of: {chosen['reason']}")

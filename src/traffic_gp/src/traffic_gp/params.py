@@ -103,6 +103,16 @@ class PeopleCounterParams(NodeConfig):
                               minimum=0.0)
     map_frame: str = param("map", "frame of the map and of the published counts")
 
+    def make_counter(self, cells, **overrides):
+        """The counter's core (`counting.PeopleCounter`) with these settings on `cells`."""
+        from traffic_gp.counting import PeopleCounter
+
+        settings = dict(watch=self.watch, max_range=self.max_range,
+                        person_radius=self.person_radius, dwell_time=self.dwell_time,
+                        min_detections=self.min_detections, max_gap=self.max_gap)
+        settings.update(overrides)
+        return PeopleCounter(cells, **settings)
+
     def check(self) -> None:
         if not (self.cell_size > 0 and self.max_range > 0 and self.dwell_time > 0):
             raise ConfigError(f"~cell_size, ~max_range and ~dwell_time must be positive, got "

@@ -108,10 +108,7 @@ class PeopleCounterNode:
 
     def _set_map(self, grid) -> None:
         c = self.config
-        self.counter = PeopleCounter(CellGrid.from_map(grid, c.cell_size), watch=c.watch,
-                                     max_range=c.max_range, person_radius=c.person_radius,
-                                     dwell_time=c.dwell_time, min_detections=c.min_detections,
-                                     max_gap=c.max_gap)
+        self.counter = c.make_counter(CellGrid.from_map(grid, c.cell_size))
         rospy.loginfo(f"people_counter: map {grid.width}x{grid.height}, counting as {self.robot_id}")
 
     def status(self) -> str:

@@ -113,6 +113,7 @@ class TrafficServer:
         self.feed_seq: Any = None                         # central feed position of the model
         self._pending_seq: Any = None
         self.follower: Optional[ChangesFollower] = None
+        self._counts_sub: Optional[rospy.Subscriber] = None
 
     @property
     def model(self):
@@ -136,7 +137,8 @@ class TrafficServer:
         if self.config.source == "central":
             self._start_central()
         else:
-            rospy.Subscriber("people_counts", PeopleCount, self._inbox.put, queue_size=1000)
+            self._counts_sub = rospy.Subscriber("people_counts", PeopleCount, self._inbox.put,
+                                                queue_size=1000)
         rospy.Service("~predict_count", PredictCount, self._predict_count)
         rospy.Service("~predict_region", PredictRegion, self._predict_region)
         rospy.Service("~save_model", Trigger, self._save_service)
@@ -147,7 +149,7 @@ class TrafficServer:
 
     def _load(self, path: str) -> None:
         """Serve the saved model's posterior at once (NumPy, no TensorFlow); the trainable model
-        is loaded by the training thread when new observations arrive."""
+        is loaded by the training thread once a source of counts is connected."""
         start = time.perf_counter()
         self.learner.loaded(PosteriorSnapshot.load(path))
         rospy.loginfo(f"traffic_gp: loaded {path} ({self.model.n_steps_} steps, "
@@ -274,10 +276,16 @@ class TrafficServer:
         else:
             with self._lock:
                 self._commit_learned()  # messages that gave no rows still move the feed on
-        self.learner.step(self.cells, self._stop, trained)
+        self.learner.step(self.cells, self._stop, trained, rows_coming=self._rows_coming())
         if trained and self.model is not None and self.model.n_steps_:
             rospy.loginfo_throttle(30, f"traffic_gp: {self.model.n_rows_} rows, "
                                        f"{self.model.n_steps_} steps")
+
+    def _rows_coming(self) -> bool:
+        """A source of counts is there: the central feed, or a publisher of people_counts."""
+        if self.follower is not None:
+            return True
+        return self._counts_sub is not None and self._counts_sub.get_num_connections() > 0
 
     def _commit_learned(self) -> None:
         """The pending rows are in the model now (call with the lock held)."""

@@ -32,6 +32,21 @@ ANNEAL_SHARE = 0.4
 class Training:
     """Mixin of `TrafficGP`: `_train` and the step-size schedule."""
 
+    def prepare_training(self) -> None:
+        """Get ready to train for a long time in short chunks (a node learning online): a
+        compiled step, traced now. Without this, a first training of fewer than COMPILE_STEPS
+        steps makes an eager step (quicker for a few dozen steps, about 7x the CPU per step
+        after that), kept for the model's life. Call outside any lock the model's readers take:
+        tracing takes seconds, and nothing is trained."""
+        if self._trainer is not None and self._trainer.compiled:
+            return
+        self._trainer = gp_parts.Trainer(self.model_, learning_rate=self.learning_rate,
+                                         gamma=self.natgrad_gamma, compiled=True)
+        self._trainer_used, self._trainer_steps = False, 0
+        start = time.perf_counter()
+        self._trainer.trace()
+        self.compile_seconds_ += time.perf_counter() - start
+
     def _train(self, data: Observations, n_steps: int, *, anneal: bool = False,
                held_out: Optional[Observations] = None, rate_scale: float = 1.0):
         """Train `n_steps` minibatch steps on `data`; with `held_out` rows, stop early on them
