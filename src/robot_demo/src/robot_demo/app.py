@@ -13,7 +13,7 @@ import signal
 import socket
 import time
 from pathlib import Path
-from typing import List, Optional, Tuple, Type, TypeVar
+from typing import Dict, List, Optional, Tuple, Type, TypeVar
 
 import rospkg
 import rospy
@@ -30,7 +30,7 @@ from robot_demo.chapters import (
     robot,
 )
 from robot_sim.params import load_config_file
-from ros_harness import LaunchSet, PouchDBServer, RosCore, RosLaunch, free_port
+from ros_harness import LaunchSet, ManagedProcess, PouchDBServer, RosCore, RosLaunch, free_port
 
 __all__ = ["CHAPTERS", "Demo", "workspace_root", "parse_args", "main"]
 
@@ -55,6 +55,14 @@ class Demo:
         self.db_url = db_server.database_url("robot_data")
         self.output = output
         self.launches = LaunchSet(core, output / "logs")
+        self.background: Dict[str, ManagedProcess] = {}
+
+    def start_background(self, name: str, argv: List[str]) -> ManagedProcess:
+        """Start a long job (e.g. training a model) now, beside the chapters; its output goes to
+        logs/`name`.log. Stopped at the end if still running."""
+        process = ManagedProcess(argv, name=name, log_path=self.output / "logs" / f"{name}.log")
+        self.background[name] = process.start()
+        return process
 
     def launch(self, package_or_path: str, launch_file: str = "", **args) -> RosLaunch:
         """Start `roslaunch package launch_file` (or a path) with `args`; stopped at the end."""
@@ -66,6 +74,8 @@ class Demo:
 
     def stop_all(self) -> None:
         self.launches.stop_all()
+        for process in self.background.values():
+            process.stop()
 
     @staticmethod
     def workspace_launch(name: str) -> str:
@@ -112,6 +122,10 @@ def main(argv: Optional[List[str]] = None) -> int:
     chapters_start = time.monotonic()
     failed, times = [], {}
     try:
+        for name in args.only or CHAPTERS:     # long jobs of later chapters start now
+            prepare = getattr(CHAPTERS[name], "prepare", None)
+            if prepare is not None:
+                prepare(demo)
         for name in args.only or CHAPTERS:
             succeeded, times[name] = _run_chapter(name, demo)
             if not succeeded:
