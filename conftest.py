@@ -8,7 +8,7 @@ import pytest
 
 pytest_plugins = ["ros_harness.pytest_plugin"]
 
-CPU_REPORT_FILES = 25
+CPU_REPORT_FILES = int(os.environ.get("CPU_REPORT_FILES", "25"))  # files listed in the CPU report
 _last_cpu = [None]
 _cpu_by_file = defaultdict(float)
 _worker_cpu = []        # (whole worker process, its test files): from each pytest-xdist worker
