@@ -36,6 +36,8 @@ CLUSTER_SCRIPT = "couchdb-cluster.sh"
 TARBALL = "couchdb-release.tar.gz"
 MEMBER = "robot"
 _HASH_ITERATIONS = 10_000  # the admin's pbkdf2 hash (test servers only; CouchDB's default is 600,000)
+#: Erlang VM flags (ERL_AFLAGS) of the copies: no busy waiting of idle schedulers.
+IDLE_SCHEDULERS_SLEEP = "+sbwt none +sbwtdcpu none +sbwtdio none"
 
 
 def shared_couchdb_dir(workspace_root: Path) -> Path:
@@ -104,6 +106,9 @@ class _CouchCopy:
     def _env(self) -> Dict[str, str]:
         env = dict(os.environ, ERL_EPMD_PORT=str(self.epmd_port))
         env.setdefault("COUCHDB_START_TIMEOUT", str(int(START_TIMEOUT * 2)))
+        # Idle Erlang schedulers spin before they sleep: on a 2-core machine shared with the
+        # tests that is CPU taken from them (about half of an idle node's CPU) for no answer.
+        env.setdefault("ERL_AFLAGS", IDLE_SCHEDULERS_SLEEP)
         return env
 
     def _script(self, script: str, args: Sequence[str], *, env: Optional[Dict[str, str]] = None,
