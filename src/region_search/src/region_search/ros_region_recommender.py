@@ -321,7 +321,11 @@ class RegionRecommenderNode:
 
     def _recommender(self):
         """The recommender for the service's current backend and model (rebuilt on a change:
-        vectors of two models must not mix, e.g. after the server restarted with a fallback)."""
+        vectors of two models must not mix, e.g. after the server restarted with a fallback).
+        While the backend is not known yet, one small request learns it first: features built
+        for a guessed backend would encode every label only to be thrown away."""
+        if not self.client.backend:
+            self.client(["probe"])
         if self.recommender is None or self._built_for != self.client.identity:
             identity = self.client.identity
             backend = self.client.backend if self.client.backend in BACKENDS else "word2vec"

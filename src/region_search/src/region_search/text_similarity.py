@@ -17,6 +17,7 @@
 """
 import re
 from collections import defaultdict
+from functools import lru_cache
 from typing import Dict, FrozenSet, Iterable, List, Optional, Sequence, Tuple
 
 __all__ = ["STOPWORDS", "tokenize", "content_words", "is_number", "trigrams",
@@ -62,13 +63,17 @@ def trigrams(word: str) -> FrozenSet[str]:
     return frozenset(padded[i:i + 3] for i in range(max(len(padded) - 2, 1)))
 
 
+# the same few hundred label and phrase words are compared again and again
+_recent_trigrams = lru_cache(maxsize=4096)(trigrams)
+
+
 def spelling_similarity(a: str, b: str) -> float:
     """Dice coefficient of the padded character trigrams; numbers are equal or not at all."""
     if a == b:
         return 1.0
     if is_number(a) or is_number(b):
         return 0.0
-    grams_a, grams_b = trigrams(a), trigrams(b)
+    grams_a, grams_b = _recent_trigrams(a), _recent_trigrams(b)
     return 2.0 * len(grams_a & grams_b) / (len(grams_a) + len(grams_b))
 
 
