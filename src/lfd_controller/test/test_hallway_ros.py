@@ -1,6 +1,6 @@
 """reward_controller's path mode for real (roscore, roslaunch): with a hallway reward it follows
-a nav_msgs/Path, stops for what the scan shows inside its safety margin and says so on
-/diagnostics."""
+a nav_msgs/Path, stops (zero speed) for what the scan shows inside its safety margin ahead and
+says so on /diagnostics."""
 import math
 
 import numpy as np
@@ -85,5 +85,6 @@ def test_path_mode_follows_the_path_and_stops_inside_the_safety_margin(rospy_nod
     keys = {kv.key: kv.value for kv in diagnostics.msg.status[0].values}
     assert keys["following"] == "the path on /path" and float(keys["length_m"]) == pytest.approx(6.0)
     ahead["range"] = 0.12                      # 0.1 + 0.12 m from the base: inside 0.18 + 0.05
-    wait_until(lambda: status(DiagnosticStatus.WARN, "stopped: scan") and cmd.msg.linear.x == 0.0
-               and cmd.msg.angular.z == 0.0, 120, what="a zero command and the reason")
+    odom.twist.twist.linear.x = 0.3            # and the robot moving toward it
+    wait_until(lambda: status(DiagnosticStatus.WARN, "stopped: scan") and cmd.msg.linear.x == 0.0,
+               120, what="a zero speed and the reason")

@@ -48,9 +48,9 @@ __all__ = ["HALLWAY_DRIVING", "HALLWAY_SAFETY", "room_margin", "TaskBuilder", "H
 # of something static, a detour past it: planner.RecedingHorizonController's unstall),
 # discount 0.97, a barrier 0.1 m beyond touching, a safety stop (zero speed; turning in place
 # allowed) when moving on would bring the scan within 0.05 m of the robot's edge, the path
-# reported blocked after 20 s held up, the local waypoint 4 m ahead on the path or the furthest point up to there in the scan's sight
-# (further than a 4 s window or the look-ahead travels: a waypoint passed inside a window
-# turns its progress feature around).
+# reported blocked after 20 s held up, the local waypoint 4 m ahead on the path or the furthest
+# point up to there in the scan's sight (further than a 4 s window or the look-ahead travels: a
+# waypoint passed inside a window turns its progress feature around).
 HALLWAY_DRIVING = {"horizon": 12, "plan_dt": 0.4, "terminal": 0.0, "spread_seeds": True,
                    "discount": 0.97, "max_iter": 12, "seed_turns": (0.0, 1.0, -1.0),
                    "detour": 0.9, "unstall": 2.0}

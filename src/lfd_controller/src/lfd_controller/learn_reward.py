@@ -11,7 +11,9 @@ Every failure to read or write a source is an LfdError (DemonstrationError when 
 demonstration is found; RewardNotAcceptedError for a person reward refused by its acceptance
 check), which `main` turns into one `ERROR:` line and exit status 1.
 """
+import json
 import sys
+import time
 from typing import Dict, List, Optional, Sequence
 
 import yaml
@@ -20,7 +22,9 @@ from std_msgs.msg import String
 from lfd_controller import ros_demos
 from lfd_controller.demos import Demonstration
 from lfd_controller.errors import DemonstrationError, LfdError
-from lfd_controller.learning import learn_and_save
+from lfd_controller.hallway import calibrate_pace, fit_hallway_reward
+from lfd_controller.hallway_recording import moving_speed, recorded_windows
+from lfd_controller.learning import learn_and_save, save_reward
 from lfd_controller.params import LearnRewardParams
 from robot_common.errors import ConfigError
 from ros_mongo import StoreError, open_store, redact_url
@@ -88,12 +92,39 @@ def store_reward(reward, db_url: str, info: Optional[dict] = None) -> str:
         raise LfdError(f"cannot store the reward in {db_url}: {err}") from err
 
 
+def learn_building_reward(bags, *, output: str, seed: int = 0) -> str:
+    """A hallway reward from building drives recorded in bags (the steps with the path, scans
+    and tracked people the recorder kept): CIOC on their 4 s windows (fit_hallway_reward), the
+    pace set to the drives' median moving speed (calibrate_pace). No acceptance check: it needs
+    the building with the controller in the loop (bench/lfd_controller/lfd_building.py runs it).
+    The scans are taken as seen from the base (a laser ahead of it shifts the scan points)."""
+    drives = ros_demos.read_building_bags(bags) if bags else []
+    if not drives:
+        raise DemonstrationError("no building demonstrations (bags with /path, /scan and /people "
+                                 "beside the steps; the database keeps the steps only) in "
+                                 f"{list(bags)}")
+    started = time.monotonic()
+    windows = [window for demo, sensors in drives for window in recorded_windows(demo, sensors)]
+    reward, learner = fit_hallway_reward(windows, seed)
+    reward = calibrate_pace(reward, moving_speed([demo for demo, _ in drives]))
+    seconds = time.monotonic() - started
+    path = save_reward(reward, output, demonstrations=len(drives), windows=len(windows),
+                       learning_seconds=round(seconds, 2),
+                       log_likelihood_per_demo=float(learner.log_likelihood_),
+                       acceptance="not checked: needs the building with the controller in the loop")
+    return (f"learned a hallway reward from {len(drives)} building drives ({len(windows)} windows) "
+            f"in {seconds:.1f} s -> {path}\nweights: "
+            + json.dumps(reward.to_dict()["weights"]))
+
+
 def learn_from_sources(bags, db_url: str = "", *, scenario: str = "", session_id: str = "",
                        robot_ids: Sequence[str] = (), kind: str = "linear", output: str,
                        store_db: bool = False, plots: str = "", seed: int = 0,
                        trim_steps: Optional[int] = 10, accept_mismatch: bool = False) -> str:
     """Load, learn, save (store with `store_db` and a `db_url`, and plot); returns a summary
     whose last line counts the demonstrations per robot (also in the stored reward's info)."""
+    if kind == "hallway":
+        return learn_building_reward(bags, output=output, seed=seed)
     demos = load_sources(bags, db_url, scenario, session_id, robot_ids)
     per_robot = demos_per_robot(demos)
 

@@ -188,7 +188,8 @@ class LearnRewardParams(NodeConfig):
     robot_ids: List[str] = param([], "only database demonstrations recorded by these robots (a "
                                      "fleet's central database holds every robot's); empty: all")
     kind: str = param("linear", "reward model (person: learning.fit_person_reward, for joystick "
-                                "demonstrations)", choices=("linear", "gp", "person"))
+                                "demonstrations; hallway: a path-mode reward from building drives "
+                                "in bags)", choices=("linear", "gp", "person", "hallway"))
     output: str = param("", "reward file to write (YAML)")
     store_db: bool = param(False, "also store the reward in --db-url")
     plots: str = param("", "folder for plots of demos and reward field")

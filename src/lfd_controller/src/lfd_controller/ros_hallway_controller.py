@@ -14,6 +14,7 @@ from std_srvs.srv import SetBool, SetBoolResponse
 
 from lfd_controller.hallway import HALLWAY_DRIVING, HallwayController
 from lfd_controller.params import RewardControllerParams
+from lfd_controller.ros_demos import people_arrays, scan_arrays
 from robot_common.gridplan import NoPathError, plan_path
 from robot_common.msg import People
 from robot_common.ros_maps import msg_to_grid
@@ -42,7 +43,8 @@ class HallwayControllerNode:
       People: tracked positions and velocities, the layout of people_msgs/People).
     Topics out: cmd_vel (geometry_msgs/Twist), ~cycle_time (std_msgs/Float64), /diagnostics
       (diagnostic_msgs/DiagnosticArray, name "reward_controller: path"): OK following (progress,
-      waypoint) / arrived, WARN stopped (what the scan shows inside the margin) or no path, ERROR
+      waypoint) / arrived, WARN stopped (zero speed, turning allowed: what the scan shows inside
+      the margin on its way) or no path, ERROR
       blocked (held up longer than ~blocked_after: the robot stays stopped until a new path).
     Services: ~enable (std_srvs/SetBool).
     """
@@ -115,17 +117,14 @@ class HallwayControllerNode:
             self.state = (np.array(odom_state(msg)), time.monotonic())
 
     def on_scan(self, msg: LaserScan) -> None:
-        angles = msg.angle_min + msg.angle_increment * np.arange(len(msg.ranges))
-        ranges = np.asarray(msg.ranges, float)
-        ranges[(ranges < msg.range_min) | (ranges > msg.range_max)] = np.inf
+        scan = scan_arrays(msg)
         with self.lock:
-            self.scan = (angles, ranges)
+            self.scan = scan
 
     def on_people(self, msg: People) -> None:
-        positions = np.array([[p.position.x, p.position.y] for p in msg.people]).reshape(-1, 2)
-        velocities = np.array([[p.velocity.x, p.velocity.y] for p in msg.people]).reshape(-1, 2)
+        people = people_arrays(msg)
         with self.lock:
-            self.people = (positions, velocities)
+            self.people = people
 
     def on_enable(self, request):
         with self.lock:

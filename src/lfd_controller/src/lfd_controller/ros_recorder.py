@@ -6,7 +6,8 @@ from typing import Optional
 import rospy
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import TimeReference
+from nav_msgs.msg import Path as PathMsg
+from sensor_msgs.msg import LaserScan, TimeReference
 from std_msgs.msg import Bool, String
 from std_srvs.srv import Trigger, TriggerResponse
 
@@ -16,6 +17,7 @@ from lfd_controller.msg import Demonstration as DemonstrationMsg
 from lfd_controller.params import ROS_HOME_PREFIX, DemoRecorderParams
 from lfd_controller.recording import DemoBuilder, SampleMatcher
 from robot_common.errors import ModelError, TaskError
+from robot_common.msg import People
 from robot_common.ros_node import odom_state, read_config, ros_home
 from robot_common.tasks import scenario_from_yaml
 from ros_mongo import StoreError, open_store
@@ -31,6 +33,11 @@ def resolve_bag_dir(value: str) -> Optional[Path]:
     return Path(value).expanduser()
 
 
+def _stamp(msg) -> rospy.Time:
+    """The message's stamp, or now for an unstamped one (a latched path often is)."""
+    return rospy.Time.now() if msg.header.stamp.is_zero() else msg.header.stamp
+
+
 class DemoRecorderNode:
     """Records one demonstration between ~start and ~stop.
 
@@ -44,7 +51,10 @@ class DemoRecorderNode:
       ~min_steps (int, 5), ~use_applied_cmd (bool, true): pair odom with the simulator's
       cmd_vel_applied and sim_time by stamp (exact); false: odom with the latest cmd_vel (robot).
     Topics in: odom, cmd_vel_applied (geometry_msgs/TwistStamped), sim_time
-      (sensor_msgs/TimeReference), cmd_vel (Twist; robot mode), scenario (std_msgs/String YAML).
+      (sensor_msgs/TimeReference), cmd_vel (Twist; robot mode), scenario (std_msgs/String YAML);
+      in a building also path (nav_msgs/Path: the path driven along, latched), scan
+      (sensor_msgs/LaserScan) and people (robot_common/People: tracked people), kept in the
+      demonstration's bag as /path, /scan, /people (what learn_reward --kind hallway learns from).
     Topics out: ~demonstrations (lfd_controller/Demonstration, latched: the last one), ~recording
       (std_msgs/Bool, latched).
     Services: ~start, ~stop (std_srvs/Trigger; stop answers with where the demo was stored).
@@ -60,7 +70,7 @@ class DemoRecorderNode:
         self.session_id = config.session_id or None
         self.exact = config.use_applied_cmd
         self.scenario, self.raw, self.count = None, [], 0
-        self.latest_cmd, self.first_stamp = (0.0, 0.0), None
+        self.latest_cmd, self.first_stamp, self.path = (0.0, 0.0), None, None
         self.demos = self.recording = None
 
     def setup(self) -> "DemoRecorderNode":
@@ -75,6 +85,9 @@ class DemoRecorderNode:
             rospy.Subscriber("sim_time", TimeReference, self.on_time, queue_size=50)
         else:
             rospy.Subscriber("cmd_vel", Twist, self.on_cmd, queue_size=50)
+        rospy.Subscriber("path", PathMsg, self.on_path, queue_size=1)
+        rospy.Subscriber("scan", LaserScan, self.on_sensor, callback_args="/scan", queue_size=20)
+        rospy.Subscriber("people", People, self.on_sensor, callback_args="/people", queue_size=20)
         rospy.Service("~start", Trigger, self.on_start)
         rospy.Service("~stop", Trigger, self.on_stop)
         return self
@@ -115,6 +128,17 @@ class DemoRecorderNode:
     def on_time(self, msg):
         self._sample(msg.header.stamp, "time", msg.time_ref.to_sec(), ("/sim_time", msg, msg.header.stamp))
 
+    def on_path(self, msg):
+        with self.lock:
+            self.path = msg
+            if self.builder.recording:
+                self.raw.append(("/path", msg, _stamp(msg)))
+
+    def on_sensor(self, msg, topic):
+        with self.lock:
+            if self.builder.recording:
+                self.raw.append((topic, msg, msg.header.stamp))
+
     def on_cmd(self, msg):
         with self.lock:
             self.latest_cmd = (msg.linear.x, msg.angular.z)
@@ -127,7 +151,7 @@ class DemoRecorderNode:
                 self.builder.start()
             except DemonstrationError as err:
                 return TriggerResponse(False, str(err))
-            self.raw = []
+            self.raw = [] if self.path is None else [("/path", self.path, _stamp(self.path))]
         self.recording.publish(Bool(True))
         return TriggerResponse(True, f"recording demonstration {self.count + 1} in {self.scenario.name}")
 

@@ -1,0 +1,73 @@
+"""Hallway demonstrations from what the recorder kept of a drive in a building (no ROS).
+
+A recorded building drive is a Demonstration (states and commands at the scenario's step) plus
+what the robot saw meanwhile: the path it followed, its laser scans and the tracked people, each
+with its episode time. `recorded_windows` gives each step the HallwayTask the controller would
+have built from the newest scan and people report at that step (`hallway.TaskBuilder`, the
+same local waypoint and scan points) and cuts the drive into 4 s windows (`hallway_windows`):
+what `fit_hallway_reward` learns from.
+"""
+from dataclasses import dataclass, field
+from typing import List, Sequence, Tuple
+
+import numpy as np
+
+from lfd_controller.demos import Demonstration
+from lfd_controller.errors import DemonstrationError
+from lfd_controller.hallway import HALLWAY_SAFETY, HallwayDemonstration, TaskBuilder, hallway_windows
+
+__all__ = ["RecordedSensors", "recorded_windows", "moving_speed"]
+
+
+@dataclass
+class RecordedSensors:
+    """What the robot saw during one recorded drive: `path` (N, 2) in the odometry frame;
+    `scans` [(episode time, angles (B,) in the laser frame, ranges (B,))]; `people` [(episode
+    time, positions (P, 2), velocities (P, 2))], each list oldest first."""
+
+    path: np.ndarray
+    scans: List[Tuple[float, np.ndarray, np.ndarray]] = field(default_factory=list)
+    people: List[Tuple[float, np.ndarray, np.ndarray]] = field(default_factory=list)
+    laser_offset: float = 0.0
+
+
+def _newest(items: Sequence[Tuple], t: float, what: str):
+    """The last item whose time is at most t (slack: half a step)."""
+    times = np.array([item[0] for item in items])
+    index = int(np.searchsorted(times, t + 0.05, side="right")) - 1
+    if index < 0:
+        raise DemonstrationError(f"no {what} at or before episode time {t:.2f} s")
+    return items[index]
+
+
+def recorded_windows(demo: Demonstration, sensors: RecordedSensors, *,
+                     lookahead: float = HALLWAY_SAFETY["lookahead"]) -> List[HallwayDemonstration]:
+    """The 4 s windows of a recorded building drive, each with the HallwayTask seen where it
+    starts (DemonstrationError when the recording has no path or no scan)."""
+    path = np.asarray(sensors.path, float).reshape(-1, 2)
+    if len(path) < 2:
+        raise DemonstrationError(f"a building demonstration needs the path it followed "
+                                 f"(got {len(path)} poses)")
+    if not sensors.scans:
+        raise DemonstrationError("a building demonstration needs the laser scans of the drive")
+    states = np.vstack([demo.start[None], demo.states if demo.states is not None else demo.rollout()])
+    builder = TaskBuilder(path, lookahead=lookahead, laser_offset=sensors.laser_offset)
+    tasks = []
+    no_people = (np.zeros((0, 2)), np.zeros((0, 2)))
+    for k in range(demo.length):
+        t = demo.t0 + k * demo.scenario.dt
+        _, angles, ranges = _newest(sensors.scans, t, "laser scan")
+        people = _newest(sensors.people, t, "people report")[1:] if sensors.people and \
+            sensors.people[0][0] <= t + 0.05 else no_people
+        tasks.append(builder(states[k], t, angles, ranges, people[0], people[1]))
+    return hallway_windows(states, demo.actions, tasks, dt=demo.scenario.dt, source=demo.source)
+
+
+def moving_speed(demos: Sequence[Demonstration]) -> float:
+    """The median speed (m/s) of the demonstrations' moving steps (above 0.05 m/s)."""
+    speeds = np.concatenate([d.states[:, 3] if d.states is not None else d.rollout()[:, 3]
+                             for d in demos])
+    moving = speeds[speeds > 0.05]
+    if not len(moving):
+        raise DemonstrationError("the demonstrations never move")
+    return float(np.median(moving))

@@ -1,0 +1,122 @@
+"""Recording a drive in a building for real (roscore, roslaunch): the demo recorder keeps the
+path, the scan and the tracked people beside the steps, and learn_reward --kind hallway learns a
+path-mode reward from the bag. The drive is a simulated person's in a corridor with someone
+walking the other way; the test publishes what the simulator saw at each step."""
+import numpy as np
+import pytest
+import rosbag
+import rospy
+from geometry_msgs.msg import PoseStamped, TwistStamped
+from nav_msgs.msg import Odometry, Path
+from sensor_msgs.msg import LaserScan, TimeReference
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from robot_common.msg import People, Person
+from ros_harness import wait_until
+
+pytestmark = pytest.mark.ros
+
+
+def corridor_drive():
+    """A person's drive down a 5 m corridor: (scene, states x_0..x_T, actions, observations)."""
+    from lfd_controller.sim.hallway_people import HallwayDriver
+    from robot_common.maps import FREE, OCCUPIED, GridMap
+    from robot_sim.hallway import HallwayScene, Walker, drive
+
+    cells = np.full((26, 70), OCCUPIED, dtype=np.int8)
+    cells[1:-1, 1:-1] = FREE
+    path = np.column_stack([np.linspace(1.0, 6.0, 51), np.full(51, 1.3)])
+    walker = Walker("p0", "head_on", np.array([[6.0, 0.55], [1.0, 0.55]]), speed=0.6)
+    scene = HallwayScene(GridMap(cells, 0.1), path, np.array([1.0, 1.3, 0.0, 0.0, 0.0]), [walker])
+    driver, seen = HallwayDriver("sampling_mpc", 0).reset(scene), []
+
+    def policy(state, t, observation):
+        seen.append(observation)
+        return driver(state, t, observation)
+    result = drive(scene, policy)
+    assert result.success
+    return scene, result.states, result.actions, seen
+
+
+def messages(stamp, state, action, t, observation):
+    odom = Odometry()
+    odom.header.stamp = stamp
+    odom.pose.pose.position.x, odom.pose.pose.position.y = state[0], state[1]
+    odom.pose.pose.orientation.z, odom.pose.pose.orientation.w = np.sin(state[2] / 2), np.cos(state[2] / 2)
+    odom.twist.twist.linear.x, odom.twist.twist.angular.z = state[3], state[4]
+    applied = TwistStamped()
+    applied.header.stamp = stamp
+    applied.twist.linear.x, applied.twist.angular.z = action
+    clock = TimeReference()
+    clock.header.stamp, clock.time_ref = stamp, rospy.Time.from_sec(t)
+    return odom, applied, clock
+
+
+def sensor_messages(stamp, observation):
+    scan = LaserScan()
+    scan.header.stamp = stamp
+    scan.angle_min, scan.angle_increment = float(observation.angles[0]), 2 * np.pi / len(observation.angles)
+    scan.range_min, scan.range_max = 0.01, 8.0
+    scan.ranges = observation.ranges.tolist()
+    people = People()
+    people.header.stamp = stamp
+    for name, where, velocity in zip(observation.names, observation.people, observation.velocities):
+        person = Person(name=name)
+        person.position.x, person.position.y = where
+        person.velocity.x, person.velocity.y = velocity
+        people.people.append(person)
+    return scan, people
+
+
+def test_the_recorder_keeps_scan_people_and_path_and_a_hallway_reward_is_learned_from_the_bag(
+        rospy_node, roslaunch, tmp_path):
+    from lfd_controller.hallway import hallway_scenario
+    from lfd_controller.learn_reward import main as learn_reward
+    from lfd_controller.learning import load_reward
+
+    scene, states, actions, seen = corridor_drive()
+    launch = roslaunch("lfd_controller", "teleop_record.launch", with_sim="false",
+                       bag_dir=str(tmp_path / "bags"))
+    launch.wait_for_services(["/demo_recorder/start", "/demo_recorder/stop"])
+    topics = {"odom": Odometry, "cmd_vel_applied": TwistStamped, "sim_time": TimeReference,
+              "scan": LaserScan, "people": People, "path": Path, "scenario": String}
+    out = {name: rospy.Publisher(f"/{name}", kind, queue_size=200, latch=name in ("path", "scenario"))
+           for name, kind in topics.items()}
+    launch.wait_for_subscribers([f"/{name}" for name in topics], timeout=120)
+    out["scenario"].publish(String(data=hallway_scenario().to_yaml()))
+    path = Path()
+    path.header.frame_id = "odom"
+    for x, y in scene.path:
+        pose = PoseStamped()
+        pose.pose.position.x, pose.pose.position.y, pose.pose.orientation.w = x, y, 1.0
+        path.poses.append(pose)
+    out["path"].publish(path)
+    base = rospy.Time.now()
+    stamps = [base + rospy.Duration.from_sec(0.1 * k) for k in range(len(states))]
+    first = messages(stamps[0], states[0], (0.0, 0.0), 0.0, seen[0])
+    for name, msg in zip(("odom", "cmd_vel_applied", "sim_time"), first):
+        out[name].publish(msg)
+    start = rospy.ServiceProxy("/demo_recorder/start", Trigger)
+    wait_until(lambda: start().success, 60, what="the recorder to have the scenario and start")
+    for k, action in enumerate(actions):
+        for name, msg in zip(("scan", "people"), sensor_messages(stamps[k], seen[k])):
+            out[name].publish(msg)
+        step = messages(stamps[k + 1], states[k + 1], action, 0.1 * (k + 1), seen[k])
+        for name, msg in zip(("odom", "cmd_vel_applied", "sim_time"), step):
+            out[name].publish(msg)
+        rospy.sleep(0.01)
+    rospy.sleep(1.0)
+    answer = rospy.ServiceProxy("/demo_recorder/stop", Trigger)()
+    assert answer.success, answer.message
+    bag_file = next((tmp_path / "bags").glob("*.bag"))
+    with rosbag.Bag(str(bag_file)) as bag:
+        counts = {topic: info.message_count
+                  for topic, info in bag.get_type_and_topic_info()[1].items()}
+    assert counts["/path"] == 1
+    assert min(counts["/scan"], counts["/people"]) >= 0.9 * len(actions), counts
+    output = tmp_path / "hallway_reward.yaml"
+    assert learn_reward(["--bags", str(bag_file), "--kind", "hallway", "--output", str(output)]) == 0
+    reward = load_reward(output)
+    named = dict(zip(reward.features.names, reward.weights))
+    assert reward.features.kind == "hallway" and named["path_progress"] > 0
