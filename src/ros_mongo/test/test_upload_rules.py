@@ -7,6 +7,7 @@ import time
 
 import genpy
 import pytest
+import requests
 from nav_msgs.msg import Odometry
 from ros_mongo_samples import serialized
 from sensor_msgs.msg import Image
@@ -17,6 +18,7 @@ from ros_mongo import StoreUnavailable, make_record, open_store
 from ros_mongo.params import RecorderParams
 from ros_mongo.recording.bandwidth import Bandwidth
 from ros_mongo.recording.bounded_spool import BoundedSpool
+from ros_mongo.recording.chunker import ChunkPolicy
 from ros_mongo.recording.deferral import Deferral
 from ros_mongo.recording.events import EventRing
 from ros_mongo.recording.ledger import Ledger, format_ledger, read_ledger
@@ -134,11 +136,12 @@ def test_the_ledger_adds_each_run_to_the_last_and_survives_restarts(tmp_path):
 class Robot:
     """The recorder core with the camera deferred until docked, its spools in `work`."""
 
-    def __init__(self, store, work, rules, bandwidth=None, now=time.time):
+    def __init__(self, store, work, rules, bandwidth=None, now=time.time, chunks=None):
         self.spool = BoundedSpool(work / "r.spool", max_bytes=64 << 20, min_free_bytes=0).open()
         self.deferral = Deferral(rules, str(work / "r.spool"), now=now).open()
         self.recorder = Recorder(store, self.spool, batch_period=0.05, retry_period=0.2,
-                                 robot_id="r1", deferral=self.deferral, bandwidth=bandwidth).start()
+                                 robot_id="r1", deferral=self.deferral, bandwidth=bandwidth,
+                                 chunks=chunks).start()
 
     def send(self, topic, cls, index, stamp=None):
         msg = cls()
@@ -219,19 +222,24 @@ def test_the_bandwidth_cap_lets_live_writes_run_into_debt_and_deferred_ones_wait
 def test_a_capped_recorder_uploads_within_the_cap_and_keeps_every_message(couchdb_url, tmp_path):
     rules = parse_upload_rules(RULES)
     cap = Bandwidth(200_000.0)   # 200 KB/s; the images below are 1 KB each, odometry about 0.7 KB
-    with open_store(couchdb_url) as store:
-        robot = Robot(store, tmp_path, rules, bandwidth=cap)
+    with open_store(couchdb_url) as store:   # live odometry as chunks, as on a slow link
+        robot = Robot(store, tmp_path, rules, bandwidth=cap, chunks=ChunkPolicy(["/odom"], period=0.25))
         robot.deferral.set_docked("/docked", True)
         started = time.monotonic()
         for index in range(300):
-            robot.send("/odom", Odometry, index)
+            robot.send("/odom", Odometry, index, stamp=1000.0 + 0.01 * index)
             robot.send(CAMERA, Image, index)
         wait_until(lambda: robot.recorder.counts()["stored"] == 600, LONG, what="600 messages central")
         elapsed = time.monotonic() - started
         counts = robot.stop()
         assert frame_ids(store, "/odom") == frame_ids(store, CAMERA) == list(range(300))
         assert counts["dropped"] == 0 and counts["released"] == 300
-        # the cap takes the encoded documents, each holding its message's bytes as base64 (4/3):
+        assert robot.recorder.uploaded_by_topic() == {"/odom": 300, CAMERA: 300}  # messages, not chunks
+        rows = requests.get(f"{couchdb_url}/_all_docs", params={"include_docs": "true"}, timeout=60).json()
+        chunks = [row["doc"] for row in rows["rows"] if row["doc"].get("kind") == "chunk"]
+        assert {d["topic"] for d in chunks} == {"/odom"} and sum(d["count"] for d in chunks) == 300
+        # the cap takes the encoded documents, holding the messages' bytes as base64 (4/3; a chunk
+        # its messages' one after another):
         # odometry >= 701 B serialized -> >= 935 B, these images >= 1042 B -> >= 1390 B; 300 of
         # each >= 697 KB through a 200 KB/s bucket that started with one burst of 200 KB:
         # (697 - 200) / 200 = 2.49 s at the least, however fast the machine
