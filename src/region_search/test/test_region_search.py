@@ -176,7 +176,8 @@ def test_regions_layer_of_the_layer_server_is_searched_too(roslaunch, rospy_node
 
 def test_the_default_sentence_backend_ranks_phrases_through_the_services(roslaunch, rospy_node,
                                                                          files, building):
-    """Defaults of region_search.launch: the sentence model and phrase-level ranking."""
+    """Defaults of region_search.launch: the sentence model and the shipped phrase-level ranking
+    (the generated building's places found, best first, room numbers matched)."""
     launch = roslaunch("region_search", "region_search.launch", labels_path=str(files / "labels.json"),
                        layer_service="")
     launch.wait_for_services(SERVICES, timeout=120)
@@ -185,15 +186,18 @@ def test_the_default_sentence_backend_ranks_phrases_through_the_services(roslaun
     recommend = rospy_node.ServiceProxy("/region_recommender/recommend", RecommendRegion)
     for phrase, best in [("where can I get a drink of water", "water_fountain"),
                          ("restroom", "bathroom"), ("take the lift", "elevator"),
-                         ("microscope", "bio_lab"), ("classroom 101", "classroom_101")]:
+                         ("microscope", "bio_lab"), ("office 202", "office_202"),
+                         ("classroom 101", "classroom_101")]:
         response = recommend(phrase=phrase, top_k=3)
         assert response.success, response.message
         assert response.labels[0] == best, (phrase, response)
+        assert list(response.scores) == sorted(response.scores, reverse=True), response
         pose = response.poses[0]
         assert (pose.position.x, pose.position.y) == pytest.approx(building.labels[best], abs=1e-3)
         assert response.backend == "sentence" and response.backend_note == ""
         assert "(sentence backend)" in response.message
         assert response.matched and response.explanations[0].startswith("evidence: name ")
+    assert "number_match 1.00" in recommend(phrase="classroom 101", top_k=3).explanations[0]
     typo = recommend(phrase="the printerz room", top_k=1)
     assert typo.labels[0] == "printer_room" and list(typo.oov_words) == ["printerz"]
     assert "word pieces 'printer' + '##z'" in typo.fallbacks[0]
