@@ -9,6 +9,7 @@ on our Python 3.8 pin set, TF 2.13 + GPflow 2.9.2, that name is plain `tf.keras`
 has `minimize` too). Older GPflow has no `gpflow.keras`: then `tf.keras` is the right one.
 """
 import os
+import sys
 from types import SimpleNamespace
 
 import numpy as np
@@ -35,8 +36,7 @@ def libs() -> SimpleNamespace:
             tf.config.threading.set_inter_op_parallelism_threads(1)
         except RuntimeError:  # TensorFlow was already running in this process: keep its threads
             pass
-        import gpflow
-
+        gpflow = _import_gpflow()
         gpflow.config.set_default_float(np.float64)
         try:
             from gpflow.keras import tf_keras
@@ -45,3 +45,18 @@ def libs() -> SimpleNamespace:
         _LIBS.update(tf=tf, gpflow=gpflow, Adam=tf_keras.optimizers.Adam,
                      versions=f"tensorflow {tf.__version__}, gpflow {gpflow.__version__}")
     return SimpleNamespace(**_LIBS)
+
+
+def _import_gpflow():
+    """gpflow, without PyTorch: its `check_shapes` imports PyTorch when installed, only to accept
+    torch tensors (none ever reach it here), for seconds of CPU in every process that trains.
+    A process that already has PyTorch keeps it; later imports of it are not affected."""
+    blocked = "torch" not in sys.modules
+    if blocked:
+        sys.modules["torch"] = None  # `import torch` raises ImportError meanwhile
+    try:
+        import gpflow
+    finally:
+        if blocked and "torch" in sys.modules and sys.modules["torch"] is None:
+            del sys.modules["torch"]
+    return gpflow
