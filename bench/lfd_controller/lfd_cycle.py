@@ -10,7 +10,8 @@ folder is absent). Prints each cycle's wall-clock time as p50 / p99 / max over a
 share over the budget, and the load average before and after (the machine is shared: the
 figure is only as good as the load it was measured under).
 
-Run: `OMP_NUM_THREADS=1 python bench/lfd_controller/lfd_cycle.py` (about 2-4 CPU-min).
+Run: `OMP_NUM_THREADS=1 python bench/lfd_controller/lfd_cycle.py --scenes 2` (about 1 CPU-min:
+20 s learning, 4 drives).
 """
 import argparse
 import os
