@@ -172,7 +172,14 @@ class _CouchCopy:
 
     def _add_member_account(self) -> None:
         user, password = self.member
-        self.admin_request("PUT", "/_users", ok=(201, 202, 412))  # a new node makes it a moment later
+        # a new node creates _users itself a moment after /_up: our PUT may race with it, and
+        # CouchDB then answers 500 "conflict" (seen on a busy machine); wait for the node's copy
+        status, answer = self.admin_request("PUT", "/_users", ok=(201, 202, 412, 500))
+        if status == 500:
+            if answer.get("reason") != "conflict":
+                raise HarnessError(f"CouchDB PUT /_users answered 500: {answer}")
+            wait_until(lambda: self.admin_request("GET", "/_users", ok=(200, 404))[0] == 200,
+                       START_TIMEOUT, what="the node's own _users database")
         self.admin_request("PUT", f"/_users/org.couchdb.user:{user}",
                            {"name": user, "password": password, "roles": [], "type": "user"},
                            ok=(201, 202, 409))
