@@ -20,7 +20,7 @@ APT_PACKAGES=(
   python3-rospy python3-rosbag python3-roslaunch python3-rostopic python3-rosservice python3-rostest
   python3-std-msgs python3-geometry-msgs python3-sensor-msgs python3-nav-msgs
   python3-visualization-msgs python3-diagnostic-msgs python3-std-srvs python3-tf2-ros
-  python3-tf2-geometry-msgs
+  python3-tf2-geometry-msgs python3-actionlib python3-actionlib-msgs python3-move-base-msgs
   # build tools catkin_make needs, and catkin_lint (tests/test_manifests.py lints every package)
   cmake g++ make catkin-lint
   # the virtual environment

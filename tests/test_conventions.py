@@ -20,7 +20,7 @@ SRC = ROOT / "src"
 #: Packages whose library is a pure core plus thin `ros_*` modules (ros_harness and robot_demo are
 #: ROS glue through and through).
 PURE_CORE_PACKAGES = ("robot_common", "robot_sim", "ros_mongo", "igmm_layers", "region_search",
-                      "traffic_gp", "lfd_controller")
+                      "traffic_gp", "lfd_controller", "errand_nav")
 BUILTIN_ERRORS = {"Exception", "RuntimeError", "ValueError", "LookupError", "KeyError", "TypeError",
                   "OSError", "IOError", "IndexError", "ArithmeticError"}
 MACHINE_PATH = re.compile(r"""(^|[\s('"`=])/(home|root|work|srv|mnt)/|(^|[\s('"`=])/tmp/(?!\.X)""")

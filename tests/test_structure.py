@@ -1,7 +1,8 @@
 """The workspace's structure, read from the source: which way the imports point.
 
-- A product core (ros_mongo, igmm_layers, region_search, traffic_gp, lfd_controller; not their
-  `sim` subpackage, not their tests) never reaches robot_sim, directly or through other modules.
+- A product core (ros_mongo, igmm_layers, region_search, traffic_gp, lfd_controller, errand_nav;
+  not their `sim` subpackage, not their tests) never reaches robot_sim, directly or through
+  other modules.
 - Every workspace package a package's code imports is declared in its package.xml (code outside
   `test/` and `sim/` needs <depend> or <exec_depend>; tests and sim parts may use <test_depend>).
 - No two workspace modules import each other, directly or round a longer cycle (imports inside
@@ -21,7 +22,8 @@ from robot_common.config_files import stale_files
 
 ROOT = Path(__file__).resolve().parents[1]
 SRC = ROOT / "src"
-PRODUCTS = ("ros_mongo", "igmm_layers", "region_search", "traffic_gp", "lfd_controller")
+PRODUCTS = ("ros_mongo", "igmm_layers", "region_search", "traffic_gp", "lfd_controller",
+            "errand_nav")
 GENERATED = ("msg", "srv", "action")
 
 

@@ -1,0 +1,130 @@
+"""One errand's bookkeeping, without ROS: arrival, progress, blockage, when to re-plan, and what
+the map looks like with what the laser saw in the way.
+
+`Errand` is fed the robot's position and the clock; it answers what the action server does next
+(`Errand.check`): go on, arrive, re-plan because the robot is held up, or re-plan because the
+crowd forecast is due again. `with_obstacles` marks laser points on a copy of the map, so the
+re-plan goes round what blocked the path (move_base's obstacle layer does the same)."""
+import math
+from dataclasses import dataclass, field
+from typing import Optional, Sequence
+
+import numpy as np
+
+from robot_common.maps import FREE, OCCUPIED, GridMap
+
+__all__ = ["Errand", "ErrandRules", "Verdict", "with_obstacles", "remaining_path"]
+
+
+@dataclass
+class ErrandRules:
+    """When an errand is done, held up or due for a new plan (defaults written once, here)."""
+
+    goal_tolerance: float = 0.3   # m from the goal counts as arrived
+    progress_step: float = 0.3    # m closer to the goal (along the path) counts as progress
+    blocked_after: float = 15.0   # s without progress: the path counts as blocked
+    replan_period: float = 30.0   # s between looks at a newer crowd forecast
+    max_replans: int = 5          # blocked re-plans per goal before it is aborted
+
+
+@dataclass
+class Verdict:
+    """What to do now: "go", "arrived", "blocked" (re-plan round it) or "forecast" (a newer
+    crowd forecast may give a better path); `reason` says why in words."""
+
+    action: str
+    reason: str = ""
+
+
+@dataclass
+class Errand:
+    """A goal being driven to along a planned path."""
+
+    goal: Sequence[float]
+    rules: ErrandRules
+    started: float
+    path: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    best_remaining: float = math.inf
+    last_progress: float = 0.0
+    last_plan: float = 0.0
+    replans: int = 0
+
+    def follow(self, path: np.ndarray, now: float) -> None:
+        """A new path to follow from now on (progress is measured along it)."""
+        self.path = np.asarray(path, float)
+        self.best_remaining, self.last_progress, self.last_plan = math.inf, now, now
+
+    def distance_to_goal(self, xy: Sequence[float]) -> float:
+        return math.hypot(xy[0] - self.goal[0], xy[1] - self.goal[1])
+
+    def remaining(self, xy: Sequence[float]) -> float:
+        """Length (m) of the path left from the point of the path nearest `xy`."""
+        if len(self.path) < 2:
+            return self.distance_to_goal(xy)
+        return float(_remaining_length(self.path, np.asarray(xy, float)))
+
+    def check(self, xy: Sequence[float], now: float) -> Verdict:
+        """The verdict for the robot at `xy` at time `now` (s)."""
+        if self.distance_to_goal(xy) <= self.rules.goal_tolerance:
+            return Verdict("arrived", f"within {self.rules.goal_tolerance:g} m of the goal")
+        left = self.remaining(xy)
+        if left < self.best_remaining - self.rules.progress_step or math.isinf(self.best_remaining):
+            self.best_remaining, self.last_progress = left, now
+        held = now - self.last_progress
+        if held > self.rules.blocked_after:
+            return Verdict("blocked", f"no progress for {held:.0f} s, {left:.1f} m from the goal")
+        if now - self.last_plan >= self.rules.replan_period:
+            return Verdict("forecast", f"{self.rules.replan_period:g} s since the last plan")
+        return Verdict("go")
+
+
+def _remaining_length(path: np.ndarray, xy: np.ndarray) -> float:
+    starts, ends = path[:-1], path[1:]
+    seg = ends - starts
+    seg_len = np.hypot(seg[:, 0], seg[:, 1])
+    t = np.clip(np.einsum("ij,ij->i", xy - starts, seg) / np.maximum(seg_len ** 2, 1e-12), 0, 1)
+    nearest = starts + t[:, None] * seg
+    gap = np.hypot(*(nearest - xy).T)
+    best = int(np.argmin(gap))
+    after = seg_len[best + 1:].sum()
+    return float((1.0 - t[best]) * seg_len[best] + after)
+
+
+def remaining_path(path: np.ndarray, xy: Sequence[float]) -> np.ndarray:
+    """The part of `path` (N, 2) still ahead of the robot at `xy`, starting at `xy`."""
+    path = np.asarray(path, float)
+    if len(path) < 2:
+        return np.vstack([np.asarray(xy, float)[None], path])
+    gaps = np.hypot(*(path - np.asarray(xy, float)).T)
+    nearest = int(np.argmin(gaps))
+    return np.vstack([np.asarray(xy, float)[None], path[nearest + 1:]]) \
+        if nearest + 1 < len(path) else np.vstack([np.asarray(xy, float)[None], path[-1:]])
+
+
+def with_obstacles(grid: GridMap, points: np.ndarray, radius: float,
+                   keep_clear: Optional[Sequence[float]] = None, keep_radius: float = 0.0) -> GridMap:
+    """A copy of `grid` with discs of `radius` (m) around `points` (N, 2) marked occupied,
+    except within `keep_radius` of `keep_clear` (the robot itself must stay free to plan from)."""
+    cells = grid.cells.copy()
+    points = np.asarray(points, float).reshape(-1, 2)
+    if len(points):
+        reach = int(math.ceil(radius / grid.resolution))
+        offsets = np.arange(-reach, reach + 1)
+        d_row, d_col = np.meshgrid(offsets, offsets, indexing="ij")
+        inside = np.hypot(d_row, d_col) * grid.resolution <= radius + 1e-9
+        d_row, d_col = d_row[inside], d_col[inside]
+        rows, cols = grid.world_to_cell(points[:, 0], points[:, 1])
+        rows = (np.asarray(rows)[:, None] + d_row[None]).ravel()
+        cols = (np.asarray(cols)[:, None] + d_col[None]).ravel()
+        ok = np.asarray(grid.inside(rows, cols), bool)
+        cells[rows[ok], cols[ok]] = OCCUPIED
+    if keep_clear is not None and keep_radius > 0:
+        row, col = grid.world_to_cell(keep_clear[0], keep_clear[1])
+        reach = int(math.ceil(keep_radius / grid.resolution)) + 1
+        rows, cols = np.mgrid[max(0, row - reach):min(grid.height, row + reach + 1),
+                              max(0, col - reach):min(grid.width, col + reach + 1)]
+        xs, ys = grid.cell_to_world(rows, cols)
+        near = (np.hypot(xs - keep_clear[0], ys - keep_clear[1]) <= keep_radius) \
+            & (grid.cells[rows, cols] == FREE)
+        cells[rows[near], cols[near]] = FREE
+    return GridMap(cells, grid.resolution, grid.origin, dict(grid.meta))

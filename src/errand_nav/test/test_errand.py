@@ -1,0 +1,103 @@
+"""An errand's bookkeeping (arrival, progress, blockage, forecast looks), the map with what the
+laser saw, and the choice of a place from region_search's answer; no ROS."""
+import math
+
+import numpy as np
+import pytest
+
+from errand_nav.errand import Errand, ErrandRules, remaining_path, with_obstacles
+from errand_nav.places import choose_place
+from robot_common.maps import FREE, OCCUPIED, GridMap
+
+RULES = ErrandRules(goal_tolerance=0.3, progress_step=0.3, blocked_after=10.0,
+                    replan_period=30.0, max_replans=2)
+PATH = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 5.0]])   # 15 m with a corner
+
+
+def errand():
+    job = Errand((10.0, 5.0), RULES, started=0.0)
+    job.follow(PATH, now=0.0)
+    return job
+
+
+def test_arrival_within_the_tolerance_only():
+    job = errand()
+    assert job.check((10.0, 4.6), 1.0).action == "go"         # 0.4 m away
+    assert job.check((10.1, 4.8), 2.0).action == "arrived"     # 0.22 m away
+
+
+def test_remaining_length_is_measured_along_the_path():
+    job = errand()
+    assert job.remaining((0.0, 0.0)) == pytest.approx(15.0)
+    assert job.remaining((5.0, 0.4)) == pytest.approx(10.0)    # beside the first leg
+    assert job.remaining((10.0, 2.0)) == pytest.approx(3.0)
+
+
+def test_held_up_longer_than_the_bound_is_blocked_and_progress_resets_the_clock():
+    job = errand()
+    assert job.check((1.0, 0.0), 0.0).action == "go"
+    assert job.check((1.1, 0.0), 9.0).action == "go"           # 0.1 m: not progress
+    assert job.check((1.2, 0.0), 10.5).action == "blocked"     # 10.5 s without 0.3 m
+    job.follow(PATH, now=10.5)                                 # a new path restarts the clock
+    assert job.check((1.2, 0.0), 12.0).action == "go"
+    assert job.check((2.0, 0.0), 21.0).action == "go"          # 0.8 m on at 21 s
+    assert job.check((2.0, 0.0), 30.0).action == "go"          # 9 s since
+    assert job.check((2.0, 0.0), 31.5).action == "blocked"
+
+
+def test_a_forecast_look_comes_every_period_while_driving():
+    job = errand()
+    for t in range(0, 30, 3):
+        assert job.check((0.3 * t, 0.0), float(t)).action == "go"
+    verdict = job.check((9.0, 0.0), 30.0)
+    assert verdict.action == "forecast"
+
+
+def test_remaining_path_starts_at_the_robot_and_keeps_what_is_ahead():
+    ahead = remaining_path(PATH, (9.8, 0.2))
+    assert ahead[0].tolist() == [9.8, 0.2]
+    assert ahead[-1].tolist() == [10.0, 5.0]
+    assert len(ahead) == 2
+
+
+def test_obstacles_are_marked_round_the_points_but_not_on_the_robot():
+    cells = np.full((40, 40), FREE, dtype=np.int8)
+    grid = GridMap(cells, 0.1)
+    marked = with_obstacles(grid, np.array([[2.0, 2.0], [1.0, 1.0]]), radius=0.3,
+                            keep_clear=(1.0, 1.0), keep_radius=0.25)
+    assert marked.cells[20, 20] == OCCUPIED and marked.cells[20, 23] == OCCUPIED
+    assert marked.cells[20, 24] == FREE                        # 0.4 m off: outside the disc
+    assert marked.cells[10, 10] == FREE                        # the robot's own spot stays free
+    assert (grid.cells == FREE).all()                          # the map itself is untouched
+
+
+def answer(**changes):
+    fields = dict(success=True, message="ok", matched=True, labels=["print room", "library"],
+                  scores=[0.9, 0.4], poses=[(3.0, 4.0, 0.5), (8.0, 1.0, 0.0)], confidence=0.93)
+    fields.update(changes)
+    return fields
+
+
+def test_a_sure_answer_is_a_goal_at_the_first_place():
+    choice = choose_place("where can I print?", **answer())
+    assert choice.sure and choice.label == "print room" and choice.pose == (3.0, 4.0, 0.5)
+    assert choice.candidates == ["print room", "library"]
+
+
+def test_not_sure_answers_and_no_match_send_nothing_and_name_the_candidates():
+    unsure = choose_place("somewhere quiet", **answer(message="not sure (confidence 0.41, below "
+                                                              "0.60): best guess print room",
+                                                      confidence=0.41))
+    assert not unsure.sure and "print room, library" in unsure.message
+    none = choose_place("a swimming pool", **answer(matched=False, labels=[], scores=[], poses=[],
+                                                    message="no labelled place matches"))
+    assert not none.sure and none.message.startswith("no labelled place")
+    failed = choose_place("x", **answer(success=False, message="no embedding service"))
+    assert not failed.sure and "no embedding service" in failed.message
+
+
+def test_the_servers_own_confidence_floor_applies_only_when_set():
+    assert choose_place("p", **answer(confidence=0.7)).sure
+    stricter = choose_place("p", **answer(confidence=0.7), min_confidence=0.8)
+    assert not stricter.sure and "0.80" in stricter.message
+    assert choose_place("p", **answer(confidence=math.nan), min_confidence=0.8).sure
