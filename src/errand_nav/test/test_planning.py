@@ -125,3 +125,19 @@ def test_the_forecast_is_linear_between_its_times_held_beyond_and_zero_off_the_g
     with pytest.raises(MapError, match="negative"):
         DensityForecast((0, 0), 0.5, [1.0, 2.0], -grids)
     assert not math.isnan(DensityForecast.quiet(GridMap(np.zeros((2, 2)), 0.1)).at(5.0).sum())
+
+
+def test_a_door_off_the_search_cells_is_passed_with_the_clearance_measured_on_the_map():
+    # two 3.8 m x 4.8 m rooms (0.05 m map cells) joined by a 0.8 m door at y 2.15-2.95 m in a
+    # 0.2 m wall: on 0.25 m search cells no whole cell row lies in the door with a free cell on
+    # each side, but the door's middle is 0.4 m from its posts: the robot fits with 0.3 m.
+    cells = np.full((100, 160), OCCUPIED, np.int8)
+    cells[2:98, 2:78] = FREE
+    cells[2:98, 82:158] = FREE
+    cells[43:59, 78:82] = FREE
+    grid = GridMap(cells, 0.05)
+    with pytest.raises(NoPathError, match="no free path"):
+        plan_path(grid, (1.0, 1.0), (7.0, 1.0), clearance=0.3, cell_size=0.25)
+    path = CrowdPlanner(grid, SETTINGS).plan((1.0, 1.0), (7.0, 1.0), 0.0, DensityForecast.quiet(grid))
+    in_door = np.abs(path.points[:, 0] - 4.0) < 0.15              # centres 3.875 and 4.125 m
+    assert in_door.any() and np.all(np.abs(path.points[in_door, 1] - 2.55) <= 0.4 - 0.3 + 1e-9)

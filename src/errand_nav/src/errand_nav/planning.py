@@ -83,7 +83,8 @@ class CrowdPlanner:
     def __init__(self, grid: GridMap, settings: PlannerSettings = PlannerSettings()):
         self.grid, self.settings = grid, settings
         self.search = SearchGrid(grid, clearance=settings.clearance, comfort=settings.comfort,
-                                 wall_cost=settings.wall_cost, cell_size=settings.cell_size)
+                                 wall_cost=settings.wall_cost, cell_size=settings.cell_size,
+                                 fine_clearance=True)
         rows, cols = np.nonzero(self.search.passable)
         self._cells = (rows, cols)
         self._centres = np.column_stack(self.search.coarse.cell_to_world(rows, cols))
