@@ -4,9 +4,9 @@ import math
 
 import numpy as np
 import pytest
+
 from errand_nav.forecast import DensityForecast
 from errand_nav.planning import CrowdPlanner, PlannerSettings
-
 from robot_common.errors import MapError
 from robot_common.gridplan import NoPathError, plan_path
 from robot_common.maps import FREE, OCCUPIED, GridMap
