@@ -7,6 +7,7 @@ import pytest
 from robot_common.errors import ConfigError, MapError
 from robot_sim.detections import building_detections, place_sightings
 from robot_sim.params import (
+    BuildingSimParams,
     MapPublisherParams,
     ObjectDetectionSimParams,
     PeopleSimParams,
@@ -14,6 +15,7 @@ from robot_sim.params import (
     UnicycleSimParams,
     load_config_file,
 )
+from robot_sim.ros_building_sim import BuildingSim
 from robot_sim.ros_detections import DetectionSim
 from robot_sim.ros_map_publisher import MapPublisher
 from robot_sim.ros_people import PeopleSimNode
@@ -23,7 +25,7 @@ from robot_sim.ros_unicycle import UnicycleSim
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "config"
 FILES = {"map_publisher.yaml": MapPublisherParams, "sensor_sim.yaml": SensorSimParams,
          "unicycle_sim.yaml": UnicycleSimParams, "people_sim.yaml": PeopleSimParams,
-         "object_detection_sim.yaml": ObjectDetectionSimParams}
+         "object_detection_sim.yaml": ObjectDetectionSimParams, "building_sim.yaml": BuildingSimParams}
 
 
 @pytest.mark.parametrize("name", sorted(FILES))
@@ -95,3 +97,19 @@ def test_sensor_sim_with_a_crowd_builds_its_people_and_tracker_from_the_paramete
     assert SensorSim(SensorSimParams(seed=0)).crowd is None
     with pytest.raises(ConfigError, match="~miss_rate and ~false_positive_rate must be in"):
         SensorSimParams.from_mapping({"miss_rate": 1.0})
+
+
+def test_building_sim_builds_its_floor_people_and_robot_from_the_parameters(tmp_path):
+    sim = BuildingSim(BuildingSimParams(people=3, start=[3.0, 6.7, 0.0], scan_beams=90))
+    assert len(sim.sim.scene.people) == 3 and sim.sim.state[:3].tolist() == [3.0, 6.7, 0.0]
+    assert len(sim.sensors.scan_angles) == 90 and sim.scan_every == 2   # 10 Hz at 0.05 s steps
+    # Monday 14:00: the people model's halls hold 10-20 people on average (test_floor_sim)
+    crowd = BuildingSim(BuildingSimParams(crowd_hour=14.0))
+    assert 10 <= len(crowd.sim.scene.people) <= 20
+    assert len(BuildingSim(BuildingSimParams(crowd_hour=14.0, max_people=5)).sim.scene.people) == 5
+    with pytest.raises(MapError, match="cannot read map file"):
+        BuildingSim(BuildingSimParams(map_yaml=str(tmp_path / "missing.yaml")))
+    with pytest.raises(ConfigError, match="must be positive"):
+        BuildingSimParams.from_mapping({"dt": 0.0})
+    with pytest.raises(ConfigError, match=r"~start is \[x, y, yaw\]"):
+        BuildingSimParams.from_mapping({"start": [1.0, 2.0]})

@@ -1,4 +1,7 @@
 """The simulator node executables under a real roscore: they publish, or exit with one clear line."""
+import math
+
+import numpy as np
 import pytest
 
 from ros_harness import ProcessDied
@@ -41,3 +44,93 @@ def test_a_bad_scenario_ends_the_unicycle_sim_with_one_clear_line(roslaunch):
     sim = roslaunch.node("robot_sim", "unicycle_sim", params={"scenario": "no_such_scenario"})
     with pytest.raises(ProcessDied, match="ERROR: /unicycle_sim: cannot read scenario file"):
         sim.wait_for_topics(["/odom"], timeout=90)
+
+
+def test_building_sim_drives_on_cmd_vel_sees_an_added_obstacle_and_reports_the_collision(
+        roslaunch, rospy_node):
+    import threading
+
+    from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped, Twist
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import LaserScan
+    from std_msgs.msg import String
+    from std_srvs.srv import Trigger
+
+    from ros_harness import wait_until
+
+    sim = roslaunch("robot_sim", "building_sim.launch", people=0, start="[3.0, 6.7, 0.0]",
+                    time_scale=2.0, with_map=False)
+    sim.wait_for_topics(["/odom", "/scan", "/people", "/building_sim/status"], timeout=90)
+    sim.wait_for_subscribers(["/cmd_vel", "/initialpose", "/building_sim/obstacles_in"], timeout=90)
+    lock, got = threading.Lock(), {"odom": [], "status": [], "scan": None}
+
+    def keep(key):
+        def store(msg):
+            with lock:
+                if key == "scan":
+                    got[key] = msg
+                else:
+                    got[key].append(msg)
+        return store
+
+    subs = [rospy_node.Subscriber("/odom", Odometry, keep("odom"), queue_size=100),
+            rospy_node.Subscriber("/building_sim/status", String, keep("status")),
+            rospy_node.Subscriber("/scan", LaserScan, keep("scan"), queue_size=1)]
+    obstacles = rospy_node.Publisher("/building_sim/obstacles_in", PointStamped, queue_size=1)
+    cmd = rospy_node.Publisher("/cmd_vel", Twist, queue_size=5)
+    pose = rospy_node.Publisher("/initialpose", PoseWithCovarianceStamped, queue_size=1)
+    try:
+        wait_until(lambda: all(p.get_num_connections() > 0 for p in (obstacles, cmd, pose)), 60,
+                   what="building_sim to connect")
+
+        def ahead():
+            """The laser's range straight ahead (the two middle beams of 360 over 270 degrees)."""
+            with lock:
+                scan = got["scan"]
+            return math.inf if scan is None else min(scan.ranges[179:181])
+
+        def status():
+            with lock:
+                return got["status"][-1].data if got["status"] else ""
+
+        wait_until(lambda: status() == "running" and ahead() == 10.0, 60, what="a clear hall ahead")
+        point = PointStamped()
+        point.header.frame_id, point.point.x, point.point.y = "map", 6.0, 6.7
+        obstacles.publish(point)
+        # the laser 0.1 m ahead of x = 3.0 meets the 0.3 m disc at x = 5.7: 2.6 m
+        wait_until(lambda: abs(ahead() - 2.6) < 0.02, 60, what="the scan to see the obstacle")
+        with lock:
+            got["odom"].clear()
+        forward = Twist()
+        forward.linear.x = 0.4
+
+        def crashed():
+            cmd.publish(forward)
+            return status() == "collided with clutter"
+        wait_until(crashed, 120, what="a collision with the obstacle ahead")
+
+        def standing():     # the odometry of the colliding step (topics may arrive in any order)
+            with lock:
+                return got["odom"] and got["odom"][-1].twist.twist.linear.x == 0.0
+        wait_until(standing, 30, what="the odometry of the robot stopped by the collision")
+        with lock:
+            odom = list(got["odom"])
+        xs = np.array([m.pose.pose.position.x for m in odom])
+        speeds = np.array([m.twist.twist.linear.x for m in odom])
+        # from x = 3.0 at the model's 0.4 m/s command (0.3824 m/s: its smooth speed limit) to
+        # where the robot's edge (0.18 m) meets the disc (5.7), within a step of 0.019 m
+        assert xs[0] < 3.05 and 5.52 < xs[-1] < 5.54
+        assert 0.381 < speeds.max() < 0.384 and speeds[-1] == 0.0
+        assert np.allclose([m.pose.pose.position.y for m in odom], 6.7)
+        assert rospy_node.ServiceProxy("/building_sim/clear_obstacles", Trigger)().message == \
+            "removed 1 obstacles"
+        back = PoseWithCovarianceStamped()
+        back.header.frame_id = "map"
+        back.pose.pose.position.x, back.pose.pose.position.y = 3.0, 6.7
+        back.pose.pose.orientation.w = 1.0
+        pose.publish(back)
+        wait_until(lambda: status() == "running" and ahead() == 10.0, 60,
+                   what="the robot back at the start with a clear hall ahead")
+    finally:
+        for sub in subs:
+            sub.unregister()

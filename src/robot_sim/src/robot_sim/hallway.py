@@ -30,16 +30,23 @@ from robot_sim.crowd import disc_ranges
 from robot_sim.errors import SimError
 
 __all__ = ["PEOPLE_KINDS", "Walker", "HallwayScene", "make_scene", "route_along", "Observation",
-           "DriveResult", "observe", "drive"]
+           "DriveResult", "observe", "drive", "hall_points", "keep_side", "PERSON_RADIUS"]
 
 PEOPLE_KINDS = ("head_on", "overtaking", "overtaken", "crossing", "group", "stepping_out")
 PERSON_RADIUS = 0.25
 
 
-def route_along(points: np.ndarray, distances: np.ndarray) -> np.ndarray:
-    """Points (len(distances), 2) at these arc lengths along a polyline (clipped to its ends)."""
+def arc_lengths(points: np.ndarray) -> np.ndarray:
+    """The arc length of a polyline (N, 2) at each of its points."""
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
+
+
+def route_along(points: np.ndarray, distances: np.ndarray,
+                arc: Optional[np.ndarray] = None) -> np.ndarray:
+    """Points (len(distances), 2) at these arc lengths along a polyline (clipped to its ends);
+    `arc`: its `arc_lengths` when known."""
     points = np.asarray(points, float)
-    arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
+    arc = arc_lengths(points) if arc is None else arc
     distances = np.clip(np.asarray(distances, float), 0.0, arc[-1])
     return np.column_stack([np.interp(distances, arc, points[:, i]) for i in (0, 1)])
 
@@ -58,6 +65,13 @@ class Walker:
     enters: bool = False
     held: float = 0.0               # seconds spent waiting for the robot so far
     holding: bool = False           # waiting now
+    _arc: Optional[np.ndarray] = field(default=None, init=False, repr=False, compare=False)
+
+    def arc(self) -> np.ndarray:
+        """The route's arc lengths (worked out once: a route does not change)."""
+        if self._arc is None:
+            self._arc = arc_lengths(np.asarray(self.route, float))
+        return self._arc
 
     def walked(self, t: float) -> float:
         """Walking time at scene time t (after departing, less the time held)."""
@@ -68,12 +82,12 @@ class Walker:
             return True
         if self.enters and t < self.depart:
             return False
-        return self.walked(t) * self.speed < path_length(self.route)
+        return self.walked(t) * self.speed < self.arc()[-1]
 
     def position(self, t: float) -> np.ndarray:
         if self.speed <= 0 or len(self.route) < 2:
             return np.asarray(self.route[0], float).copy()
-        return route_along(self.route, [self.walked(t) * self.speed])[0]
+        return route_along(self.route, [self.walked(t) * self.speed], self.arc())[0]
 
     def velocity(self, t: float, span: float = 0.1) -> np.ndarray:
         if self.holding or self.speed <= 0:
@@ -200,7 +214,7 @@ class HallwayScene:
         return centre - self.robot_radius - PERSON_RADIUS
 
 
-def _hall_points(grid: GridMap, rng, count: int, clearance: float) -> np.ndarray:
+def hall_points(grid: GridMap, rng, count: int, clearance: float) -> np.ndarray:
     """`count` random free points at least `clearance` m from any wall (hall-like spots)."""
     coarse = grid.downsample(max(1, int(round(0.1 / grid.resolution))))
     room = clearance_map(coarse, clearance)
@@ -240,7 +254,7 @@ def make_scene(grid: GridMap, seed: int, *, people: int = 4, clutter: int = 1,
 
 def _route(grid: GridMap, rng, length: Sequence[float]) -> np.ndarray:
     for _ in range(200):
-        ends = _hall_points(grid, rng, 2, 0.7)
+        ends = hall_points(grid, rng, 2, 0.7)
         straight = float(np.hypot(*(ends[1] - ends[0])))
         if not 0.5 * length[0] <= straight <= length[1]:
             continue
@@ -285,7 +299,8 @@ def _walkers(scene: HallwayScene, kind: str, rng, index: int, room: int) -> List
         else:
             stations = np.linspace(rng.uniform(2.0, 5.0), total, 60)
             speed = rng.uniform(0.2, 0.3)
-        return [Walker(name, kind, _keep_side(scene, stations, side), speed, depart, enters)]
+        route = keep_side(scene.grid, scene.path, stations, side)
+        return [Walker(name, kind, route, speed, depart, enters)]
     if kind == "crossing":
         ends = [_wall_end(scene, point, s * normal) for s in (1.0, -1.0)]
         route = np.array(ends) if rng.random() < 0.5 else np.array(ends[::-1])
@@ -308,13 +323,13 @@ def _walkers(scene: HallwayScene, kind: str, rng, index: int, room: int) -> List
                    depart=max(0.0, robot_eta - 4.0))]
 
 
-def _keep_side(scene: HallwayScene, stations: np.ndarray, side: float,
-               wanted: float = 0.75) -> np.ndarray:
+def keep_side(grid: GridMap, path: np.ndarray, stations: np.ndarray, side: float,
+              wanted: float = 0.75) -> np.ndarray:
     """Points at `stations` along the path, `wanted` m to the `side` (+1 left, -1 right) of it,
     less where the hall is narrower (a person's radius + 0.1 m from the wall)."""
-    points = route_along(scene.path, stations)
-    normals = side * _normals(scene.path, stations)
-    reach = np.array([raycast(scene.grid, float(p[0]), float(p[1]),
+    points = route_along(path, stations)
+    normals = side * _normals(path, stations)
+    reach = np.array([raycast(grid, float(p[0]), float(p[1]),
                               np.array([math.atan2(n[1], n[0])]), wanted + 1.0)[0]
                       for p, n in zip(points, normals)])
     offsets = np.clip(reach - PERSON_RADIUS - 0.1, 0.0, wanted)

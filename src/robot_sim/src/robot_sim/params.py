@@ -15,8 +15,8 @@ import yaml
 from robot_common.errors import ConfigError
 from robot_common.params import NodeConfig, param
 
-__all__ = ["MapPublisherParams", "SensorSimParams", "UnicycleSimParams", "PeopleSimParams",
-           "ObjectDetectionSimParams", "load_config_file"]
+__all__ = ["MapPublisherParams", "SensorSimParams", "UnicycleSimParams", "BuildingSimParams",
+           "PeopleSimParams", "ObjectDetectionSimParams", "load_config_file"]
 
 ConfigT = TypeVar("ConfigT", bound=NodeConfig)
 
@@ -92,6 +92,53 @@ class UnicycleSimParams(NodeConfig):
     def check(self) -> None:
         if not self.time_scale > 0:
             raise ConfigError(f"~time_scale must be positive, got {self.time_scale!r}")
+
+
+@dataclass
+class BuildingSimParams(NodeConfig):
+    """building_sim: a robot driven by cmd_vel on a floor among walking people."""
+
+    map_yaml: str = param("", _MAP_YAML_DOC)
+    seed: int = param(0, "seed of the generated building, the robot's start on a map file and "
+                         "the people's routes")
+    start: list = param([], "[x, y, yaw] of the robot in the map frame; []: the generated "
+                            "building's main hall 1.5 m from its west end facing east (a map "
+                            "file: a spot 0.7 m clear of walls drawn from `seed`)")
+    people: int = param(4, "people walking rounds through the halls (with crowd_hour < 0)",
+                        minimum=0)
+    crowd_hour: float = param(-1.0, "hour of the week (0 = Monday 00:00): as many people as the "
+                                    "people model's halls hold then on average (up to "
+                                    "max_people), placed by its densities; negative: `people`")
+    peak_density: float = param(0.15, "people per m^2 in a main hall on a weekday afternoon "
+                                      "(with crowd_hour)", minimum=0.0)
+    max_people: int = param(30, "most people with crowd_hour", minimum=0)
+    dt: float = param(0.05, "simulated seconds per step (odom, tf and cmd_vel_applied each step)")
+    time_scale: float = param(1.0, "simulated seconds per wall-clock second")
+    command_timeout: float = param(0.5, "simulated seconds after which a silent cmd_vel means stop",
+                                   minimum=0.0)
+    scan_rate: float = param(10.0, "scans (and people reports) per simulated second")
+    scan_beams: int = param(360, "laser beams per scan (270 degrees)", minimum=2)
+    scan_range: float = param(10.0, "laser range (m)")
+    people_range: float = param(8.0, "the tracker reports people in sight within this range (m)")
+    robot_radius: float = param(0.18, "the robot's disc (m): touching a wall, clutter or a person "
+                                      "is a collision")
+    obstacle_radius: float = param(0.3, "radius of a disc added on ~obstacles_in (m)")
+    odom_frame: str = param("odom", "odometry frame (the same as the map frame: map -> odom is "
+                                    "the identity)")
+    base_frame: str = param("base_link", "robot base frame")
+    map_frame: str = param("map", "map frame")
+    laser_frame: str = param("laser", "laser frame (base_link -> laser: 0.1 m ahead)")
+    people_frame: str = param("odom", "frame of the tracked people")
+
+    def check(self) -> None:
+        positive = {"dt": self.dt, "time_scale": self.time_scale, "scan_rate": self.scan_rate,
+                    "scan_range": self.scan_range, "robot_radius": self.robot_radius,
+                    "obstacle_radius": self.obstacle_radius}
+        bad = {name: value for name, value in positive.items() if not value > 0}
+        if bad:
+            raise ConfigError(f"these parameters must be positive: {bad}")
+        if self.start and len(self.start) != 3:
+            raise ConfigError(f"~start is [x, y, yaw] or [], got {self.start!r}")
 
 
 @dataclass

@@ -2,8 +2,9 @@
 on a map file), publishing the robot's standard sensor topics, each from its own thread."""
 import math
 import threading
-from typing import Callable, List, Optional
+from typing import Callable, List, Optional, Sequence, Tuple
 
+import numpy as np
 import rospy
 import tf2_ros
 from geometry_msgs.msg import Point, TransformStamped
@@ -21,7 +22,8 @@ from robot_sim.mobile_base import PatrolPath, SensorModel, hall_patrol
 from robot_sim.params import SensorSimParams
 from robot_sim.people import PeopleSimulator
 
-__all__ = ["SensorSim", "LASER_X", "people_msg", "run_at", "start"]
+__all__ = ["SensorSim", "LASER_X", "people_msg", "odometry_msg", "base_transform", "scan_msg",
+           "static_transforms", "run_at", "start"]
 
 LASER_X = 0.1      # the laser is this far ahead of base_link (the static base_link -> laser tf)
 
@@ -99,19 +101,11 @@ class SensorSim:
                 run_at(rate, publish)
 
     def _publish_static_frames(self) -> None:
-        frames = [(self.map_frame, self.odom_frame, 0.0, 0.0),
-                  (self.base_frame, self.config.laser_frame, LASER_X, 0.2),
-                  (self.base_frame, "camera_rgb_frame", 0.05, 0.4)]
-        transforms = []
-        for parent, child, x, z in frames:
-            transform = TransformStamped()
-            transform.header.stamp = self.start
-            transform.header.frame_id, transform.child_frame_id = parent, child
-            transform.transform.translation.x, transform.transform.translation.z = x, z
-            transform.transform.rotation.w = 1.0
-            transforms.append(transform)
         self._static = tf2_ros.StaticTransformBroadcaster()
-        self._static.sendTransform(transforms)
+        self._static.sendTransform(static_transforms(self.start, [
+            (self.map_frame, self.odom_frame, 0.0, 0.0),
+            (self.base_frame, self.config.laser_frame, LASER_X, 0.2),
+            (self.base_frame, "camera_rgb_frame", 0.05, 0.4)]))
 
     def _state(self):
         now = rospy.Time.now()
@@ -119,43 +113,23 @@ class SensorSim:
 
     def publish_odom(self) -> None:
         now, state = self._state()
-        msg = Odometry()
-        msg.header.stamp, msg.header.frame_id = now, self.odom_frame
-        msg.child_frame_id = self.base_frame
-        pose = msg.pose.pose
-        pose.position.x, pose.position.y = state.x, state.y
-        (pose.orientation.x, pose.orientation.y, pose.orientation.z,
-         pose.orientation.w) = yaw_to_quaternion(state.yaw)
-        msg.twist.twist.linear.x, msg.twist.twist.angular.z = state.linear, state.angular
-        msg.pose.covariance[0] = msg.pose.covariance[7] = 0.01
-        msg.pose.covariance[35] = 0.005
-        self.publishers["odom"].publish(msg)
+        self.publishers["odom"].publish(odometry_msg(now, self.odom_frame, self.base_frame, state.x,
+                                                     state.y, state.yaw, state.linear, state.angular))
 
     def publish_tf(self) -> None:
         now, state = self._state()
-        transform = TransformStamped()
-        transform.header.stamp, transform.header.frame_id = now, self.odom_frame
-        transform.child_frame_id = self.base_frame
-        transform.transform.translation.x, transform.transform.translation.y = state.x, state.y
-        rotation = transform.transform.rotation
-        rotation.x, rotation.y, rotation.z, rotation.w = yaw_to_quaternion(state.yaw)
-        self.tf.sendTransform(transform)
+        self.tf.sendTransform(base_transform(now, self.odom_frame, self.base_frame, state.x, state.y,
+                                             state.yaw))
 
     def publish_scan(self) -> None:
         now, state = self._state()
-        msg = LaserScan()
-        msg.header.stamp, msg.header.frame_id = now, self.config.laser_frame
-        msg.angle_min = float(self.sensors.scan_angles[0])
-        msg.angle_max = float(self.sensors.scan_angles[-1])
-        msg.angle_increment = self.sensors.scan_increment
-        msg.range_min, msg.range_max = 0.05, float(self.sensors.scan_range)
+        frame = self.config.laser_frame
         if self.crowd is None:
-            msg.ranges = self.sensors.scan(state).astype(float).tolist()
-            self.publishers["scan"].publish(msg)
+            self.publishers["scan"].publish(scan_msg(now, frame, self.sensors,
+                                                     self.sensors.scan(state)))
             return
         ranges, report, truth = self._crowd_scan(now, state)
-        msg.ranges = ranges.astype(float).tolist()
-        self.publishers["scan"].publish(msg)
+        self.publishers["scan"].publish(scan_msg(now, frame, self.sensors, ranges))
         self.publishers["people"].publish(people_msg(report, now, self.config.people_frame))
         self.publishers["truth"].publish(people_msg(truth, now, self.map_frame))
 
@@ -191,12 +165,70 @@ class SensorSim:
         self.publishers["joint"].publish(msg)
 
 
-def people_msg(people: List[Person], stamp, frame_id: str) -> People:
-    """robot_common/People of `people` (names, positions; velocity 0, reliability 1)."""
+def people_msg(people: List[Person], stamp, frame_id: str,
+               velocities: Optional[Sequence[Sequence[float]]] = None) -> People:
+    """robot_common/People of `people` (names, positions; `velocities` (vx, vy) each, default 0;
+    reliability 1)."""
     msg = People()
     msg.header.stamp, msg.header.frame_id = stamp, frame_id
-    msg.people = [PersonMsg(name=p.name, position=Point(p.x, p.y, 0.0), velocity=Point(),
-                            reliability=1.0) for p in people]
+    velocities = [(0.0, 0.0)] * len(people) if velocities is None else velocities
+    msg.people = [PersonMsg(name=p.name, position=Point(p.x, p.y, 0.0),
+                            velocity=Point(float(v[0]), float(v[1]), 0.0), reliability=1.0)
+                  for p, v in zip(people, velocities)]
+    return msg
+
+
+def odometry_msg(stamp, frame_id: str, child: str, x: float, y: float, yaw: float,
+                 linear: float, angular: float) -> Odometry:
+    """nav_msgs/Odometry of a planar pose and speeds (small fixed pose covariance)."""
+    msg = Odometry()
+    msg.header.stamp, msg.header.frame_id = stamp, frame_id
+    msg.child_frame_id = child
+    pose = msg.pose.pose
+    pose.position.x, pose.position.y = float(x), float(y)
+    (pose.orientation.x, pose.orientation.y, pose.orientation.z,
+     pose.orientation.w) = yaw_to_quaternion(float(yaw))
+    msg.twist.twist.linear.x, msg.twist.twist.angular.z = float(linear), float(angular)
+    msg.pose.covariance[0] = msg.pose.covariance[7] = 0.01
+    msg.pose.covariance[35] = 0.005
+    return msg
+
+
+def base_transform(stamp, frame_id: str, child: str, x: float, y: float,
+                   yaw: float) -> TransformStamped:
+    """The planar transform frame_id -> child (odom -> base_link)."""
+    transform = TransformStamped()
+    transform.header.stamp, transform.header.frame_id = stamp, frame_id
+    transform.child_frame_id = child
+    transform.transform.translation.x, transform.transform.translation.y = float(x), float(y)
+    rotation = transform.transform.rotation
+    rotation.x, rotation.y, rotation.z, rotation.w = yaw_to_quaternion(float(yaw))
+    return transform
+
+
+def static_transforms(stamp, frames: Sequence[Tuple[str, str, float, float]]
+                      ) -> List[TransformStamped]:
+    """Fixed transforms (parent, child, x ahead, z up), no rotation."""
+    transforms = []
+    for parent, child, x, z in frames:
+        transform = TransformStamped()
+        transform.header.stamp = stamp
+        transform.header.frame_id, transform.child_frame_id = parent, child
+        transform.transform.translation.x, transform.transform.translation.z = x, z
+        transform.transform.rotation.w = 1.0
+        transforms.append(transform)
+    return transforms
+
+
+def scan_msg(stamp, frame_id: str, sensors: SensorModel, ranges) -> LaserScan:
+    """sensor_msgs/LaserScan of `ranges` along the angles of `sensors` (a SensorModel)."""
+    msg = LaserScan()
+    msg.header.stamp, msg.header.frame_id = stamp, frame_id
+    msg.angle_min = float(sensors.scan_angles[0])
+    msg.angle_max = float(sensors.scan_angles[-1])
+    msg.angle_increment = sensors.scan_increment
+    msg.range_min, msg.range_max = 0.05, float(sensors.scan_range)
+    msg.ranges = np.asarray(ranges, float).tolist()
     return msg
 
 

@@ -4,7 +4,7 @@ import threading
 
 import rospy
 import tf2_ros
-from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, TransformStamped, Twist, TwistStamped
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import TimeReference
 from std_msgs.msg import String
@@ -15,6 +15,7 @@ from robot_common.maps import quaternion_to_yaw, yaw_to_quaternion
 from robot_common.ros_node import read_config
 from robot_sim.errors import SimError
 from robot_sim.params import UnicycleSimParams
+from robot_sim.ros_sensors import base_transform, odometry_msg
 from robot_sim.scenarios import SimEpisode, load_scenario
 
 __all__ = ["UnicycleSim", "start"]
@@ -127,31 +128,18 @@ class UnicycleSim:
         cmd.header.stamp, cmd.header.frame_id = stamp, self.base_frame
         cmd.twist.linear.x, cmd.twist.angular.z = applied
         self.applied.publish(cmd)
-        self.odom.publish(self.odometry(stamp, self.base_frame, state[:3], state[3], state[4]))
+        self.odom.publish(odometry_msg(stamp, self.odom_frame, self.base_frame, *state[:5]))
         obstacle = self.episode.scenario.obstacle
         (vx, vy), (ox, oy) = obstacle.velocity_at(t), obstacle.position(t)
-        msg = self.odometry(stamp, "obstacle", (ox, oy, 0.0), 0.0, 0.0)
+        msg = odometry_msg(stamp, self.odom_frame, "obstacle", ox, oy, 0.0, 0.0, 0.0)
         msg.twist.twist.linear.x, msg.twist.twist.linear.y = vx, vy
         self.obstacle.publish(msg)
-        transform = TransformStamped()
-        transform.header.stamp, transform.header.frame_id = stamp, self.odom_frame
-        transform.child_frame_id = self.base_frame
-        transform.transform.translation.x, transform.transform.translation.y = state[:2]
-        r = transform.transform.rotation
-        r.x, r.y, r.z, r.w = yaw_to_quaternion(state[2])
-        self.tf.sendTransform(transform)
+        self.tf.sendTransform(base_transform(stamp, self.odom_frame, self.base_frame, *state[:3]))
         if label != self._last_status:
             self.status.publish(String(data=label))
             self._last_status = label
         if self.markers.get_num_connections() > 0:
             self.markers.publish(self.marker_array(stamp, state, (ox, oy)))
-
-    def odometry(self, stamp, child, pose, linear, angular):
-        msg = Odometry()
-        msg.header.stamp, msg.header.frame_id, msg.child_frame_id = stamp, self.odom_frame, child
-        _pose(msg.pose.pose, *pose)
-        msg.twist.twist.linear.x, msg.twist.twist.angular.z = linear, angular
-        return msg
 
     def marker_array(self, stamp, state, obstacle_xy):
         scenario = self.episode.scenario
