@@ -1,7 +1,9 @@
 """Chunked topics (ros_mongo.storage.chunks): many small messages of a topic in one CouchDB document, read
 back message by message (real pouchdb-server through the couchdb fixtures, no ROS)."""
 import io
+import sys
 import time
+from pathlib import Path
 
 import genpy
 import pytest
@@ -9,9 +11,10 @@ import requests
 import rosbag
 from nav_msgs.msg import Odometry
 from ros_mongo_samples import serialized
+from sharded_feed_proxy import shard_of
 from std_msgs.msg import String
 
-from ros_harness import FaultProxy, wait_until
+from ros_harness import FaultProxy, ManagedProcess, wait_until
 from ros_mongo import open_store
 from ros_mongo.files.bagio import export_file
 from ros_mongo.fleet.changes import ChangesFollower
@@ -20,7 +23,7 @@ from ros_mongo.recording.bounded_spool import BoundedSpool
 from ros_mongo.recording.chunker import Chunker, ChunkPolicy
 from ros_mongo.recording.recorder import Recorder
 from ros_mongo.recording.spool import _read_frame, frames, read_entries
-from ros_mongo.records import split_time
+from ros_mongo.records import make_record, new_message_id, split_time
 from ros_mongo.replay.replay import Replayer
 from ros_mongo.storage.chunks import CHUNK_SPAN, ChunkRecord
 from ros_mongo.storage.couch import field_matcher
@@ -28,6 +31,7 @@ from ros_mongo.storage.couch import field_matcher
 T0 = 1700000000.0
 N = 2300          # /odom at 1 kHz: 2.3 s, so chunks close by time and by count
 EVERY = 50        # one /chatter message (a document of its own) per 50 odometry messages
+SHARDED_FEED_PROXY = Path(__file__).resolve().parent / "sharded_feed_proxy.py"
 
 
 def _odom(i):
@@ -160,15 +164,7 @@ def test_chunked_topic_round_trip_queries_export_and_replay(couchdb_url, tmp_pat
 
 
 @pytest.mark.db
-def test_changes_follower_yields_each_message_of_a_chunk_and_resumes_inside_one(couchdb_url, tmp_path,
-                                                                               request):
-    if "apache" in request.node.name:
-        # Known defect, not fixed yet: once, on a fresh clone, a follower resumed inside a chunk
-        # on Apache CouchDB (q = 2 shards) yielded 156 changes that came before the cut in the
-        # first feed (a clustered feed resumed from a position may replay). Every other run
-        # passed; pouchdb-server's single feed is checked strictly below.
-        request.applymarker(pytest.mark.xfail(strict=False, reason="Apache CouchDB's sharded feed "
-                                              "replayed changes once on resuming inside a chunk"))
+def test_changes_follower_yields_each_message_of_a_chunk_and_resumes_inside_one(couchdb_url, tmp_path):
     sent, _ = _record(couchdb_url, tmp_path)
     with open_store(couchdb_url) as store:
         ids = [m.id for m in store.find_messages(topic="/odom")]
@@ -204,6 +200,81 @@ def test_changes_follower_yields_each_message_of_a_chunk_and_resumes_inside_one(
     assert runs == len({chunk_of[n] for n in order}), "a chunk's messages split or out of order"
     follower.close()
     again.close()
+
+
+@pytest.fixture
+def sharded_feed(couchdb_server, tmp_path):
+    """sharded_feed_proxy.py (a real process) in front of pouchdb-server: its `_changes` feed as
+    Apache CouchDB's two shards can order it; the proxy's root URL (then /<order>/<db>)."""
+    ready = tmp_path / "sharded_feed.port"
+    process = ManagedProcess([sys.executable, str(SHARDED_FEED_PROXY), "--upstream", couchdb_server.url,
+                              "--ready", str(ready)], name="sharded feed proxy",
+                             log_path=tmp_path / "sharded_feed.log").start()
+    try:
+        wait_until(ready.exists, 60, what="the sharded feed proxy's port", check=process.check_alive)
+        yield f"http://127.0.0.1:{int(ready.read_text())}"
+    finally:
+        process.stop(timeout=10)
+
+
+def _small_and_chunked(store):
+    """40 /chatter documents, one chunk of 100 /odom messages, 40 more /chatter documents, in
+    that order, with fixed ids (so the proxy's shards are the same on every run): the ids of
+    the chatter documents and of the chunk's messages."""
+    def record(topic, msg, stamp, number):
+        receive = split_time(stamp)
+        fixed = new_message_id(receive.secs, receive.nsecs, "r1", token=f"{number:012x}")
+        return make_record(topic, type(msg), serialized(msg), receive=receive, robot_id="r1",
+                           record_id=fixed)
+    chatter = [record("/chatter", String(data=str(i)), T0 + i, i) for i in range(80)]
+    odom = [record("/odom", _odom(i), T0 + 39.5 + i * 1e-3, 100 + i) for i in range(100)]
+    for entries in (chatter[:40], [ChunkRecord(odom)], chatter[40:]):
+        assert store.insert_records(entries) == len(entries)
+    return [r.id for r in chatter], [r.id for r in odom]
+
+
+@pytest.mark.db
+def test_changes_follower_resumes_inside_a_chunk_that_another_shards_changes_overtake(couchdb_server,
+                                                                                      sharded_feed):
+    """Apache CouchDB (q = 2) passes its shards' changes on as they reach it, anew on each
+    request: after a resume, one shard's changes may fill a page before the next change of the
+    other comes (a real node under load once made a follower resumed inside a chunk yield the
+    chunk's first messages again). sharded_feed_proxy.py, in front of pouchdb-server, serves its
+    feed as two shards: read in write order, resumed with the chunk's shard answering last."""
+    name = "overtaken_chunk"
+    with open_store(couchdb_server.database_url(name)) as store:
+        chatter_ids, chunk_ids = _small_and_chunked(store)
+    follower = ChangesFollower(f"{sharded_feed}/fair/{name}", page=3)
+    got = []
+    while not follower.caught_up:
+        got += follower.poll()
+    follower.close()
+    ids = [item.message.id for item in got]
+    # pouchdb-server's order: the writes in order (a batch's documents in any order)
+    assert sorted(ids[:40]) == chatter_ids[:40] and sorted(ids[140:]) == chatter_ids[40:]
+    assert ids[40:140] == chunk_ids
+    cut = 40 + 39                                       # 40 of the chunk's 100 messages yielded
+    chunk = chunk_ids[0] + ".chunk"
+    assert got[cut].seq["chunk"] == chunk and got[cut].seq["done"] == 40
+    # the fault: from the feed position before the chunk, the other shard's documents fill a
+    # page of 3 and the chunk comes in a later page
+    slow = f"{sharded_feed}/slow{shard_of(chunk)}/{name}"
+    before = got[39].seq
+    page = requests.get(f"{slow}/_changes", params={"since": before, "limit": 3, "include_docs": "true"},
+                        timeout=60).json()
+    assert len(page["results"]) == 3 and chunk not in [row["id"] for row in page["results"]]
+    # resuming from the position (and from one as an earlier release saved it, holding the feed
+    # position before the chunk): nothing twice, nothing lost; the chunk's other 60 messages
+    # first, in order, then the rest of the feed
+    for since in (got[cut].seq, {"since": before, "chunk": chunk, "done": 40}):
+        again = ChangesFollower(slow, since=since, page=3)
+        rest = []
+        while not again.caught_up:
+            rest += again.poll()
+        again.close()
+        rest_ids = [item.message.id for item in rest]
+        assert sorted(rest_ids) == sorted(ids[cut + 1:])
+        assert rest_ids[:60] == chunk_ids[40:]
 
 
 @pytest.mark.db

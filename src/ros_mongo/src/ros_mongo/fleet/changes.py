@@ -11,14 +11,18 @@ reads it) and `seq`, the feed position just after it; save the `seq` of the last
 learner has folded in, and a new follower started `since` it yields only later changes.
 Order: the server's feed order, kept as it is (so that every `seq` resumes exactly): write order
 on pouchdb-server; Apache CouchDB interleaves the feeds of a database's shards (q = 2 by default,
-also on one node), so there each change comes once, but two messages may come in another order
-than they were written. A learner that needs time order sorts by `receive_time`, or the admin
-creates the database with one shard (`PUT /db?q=1`).
+also on one node) in the order their rows reach it, anew on each request, so there two messages
+may come in another order than they were written, and after a resume the changes of one shard may
+fill a page before the next change of the other comes. A learner that needs time order sorts by
+`receive_time`, or the admin creates the database with one shard (`PUT /db?q=1`).
 A chunk (ros_mongo.storage.chunks: many messages of a topic in one document) yields its messages one by
 one, with their own ids; the position after a message inside a chunk is
-`{"since": <the feed position before the chunk>, "chunk": <its id>, "done": <messages yielded>}`
-(JSON-able like a sequence), so a follower started from it yields the rest of that chunk, then
-later changes.
+`{"since": <the chunk's own feed position>, "chunk": <its id>, "done": <messages yielded>}`
+(JSON-able like a sequence). A follower started from it reads the rest of that chunk from the
+chunk document itself (`GET /db/<id>`: a chunk is written once and never changes), then the feed
+after the chunk, and drops the chunk if the feed sends it again (CouchDB's feed promises each
+change at least once). A position saved by an earlier release held the feed position before the
+chunk: it resumes the same way (the chunk, coming again in the feed, is dropped).
 
 The selector is a Mango selector evaluated here on each document (`selects`, ros_mongo.storage.mango:
 the answer Apache CouchDB gives for it; e.g. `$eq null` matches a present null only). It is not
@@ -34,6 +38,7 @@ the last one in `last_error`. Messages never contain credentials (URLs redacted)
 import logging
 import threading
 from typing import Any, Dict, Iterator, List, NamedTuple, Optional
+from urllib.parse import quote
 
 import pybase64
 
@@ -84,6 +89,7 @@ class ChangesFollower:
         self.last_error = ""
         self.caught_up = False  # the last poll reached the end of the feed
         self.skipped = 0  # selected documents that could not be decoded
+        self.resumed_chunk: Optional[str] = None  # the chunk resumed inside: dropped from the feed
 
     @property
     def shown(self) -> str:
@@ -107,31 +113,48 @@ class ChangesFollower:
             return None
 
     def poll(self) -> List[FeedItem]:
-        """One request: the selected changes among the next `page` changes after `since`.
-        Advances `since`; `caught_up` tells whether the feed's end was reached."""
-        inside = self.since if isinstance(self.since, dict) and "chunk" in self.since else None
-        since = inside["since"] if inside else self.since
-        params = {"since": str(since), "include_docs": "true", "limit": str(self.page)}
+        """One request: the selected changes among the next `page` changes after `since` (from a
+        position inside a chunk: the rest of that chunk, read from its document). Advances
+        `since`; `caught_up` tells whether the feed's end was reached."""
+        if isinstance(self.since, dict) and "chunk" in self.since:
+            return self._rest_of_chunk(self.since)
+        params = {"since": str(self.since), "include_docs": "true", "limit": str(self.page)}
         answer = self.database.json("GET", "/_changes", params=params)
         self.caught_up = len(answer.get("results", [])) < self.page
         items: List[FeedItem] = []
-        before = since
         for change in answer.get("results", []):
-            seq = change.get("seq", before)
+            seq = change.get("seq", self.since)
             doc = change.get("doc") or {}
-            if not change.get("deleted") and doc.get("kind") == "chunk":
-                done = inside["done"] if inside and inside["chunk"] == doc.get("_id") else 0
-                items += self._chunk_items(doc, before, seq, done)
-            elif not change.get("deleted") and self.selects(doc):
+            if change.get("deleted") or doc.get("_id") == self.resumed_chunk:
+                pass  # a deletion, or the chunk resumed inside (read from its document)
+            elif doc.get("kind") == "chunk":
+                items += self._chunk_items(doc, seq, 0)
+            elif self.selects(doc):
                 message = self._decode(doc)
                 if message is not None:
                     items.append(FeedItem(seq, message))
-            before = self.since = seq
+            self.since = seq
         self.since = answer.get("last_seq", self.since)
         return items
 
-    def _chunk_items(self, doc: Dict[str, Any], before: Any, seq: Any, done: int) -> List[FeedItem]:
-        """The selected messages of a chunk (after the first `done`), each with its position."""
+    def _rest_of_chunk(self, position: Dict[str, Any]) -> List[FeedItem]:
+        """The selected messages of the chunk `position` points into, after its first `done`,
+        from the chunk document (gone: none); then `since` is the feed position in `position`."""
+        chunk_id = str(position["chunk"])
+        doc = self.database.json("GET", "/" + quote(chunk_id, safe=""), ok=(200, 404))
+        items: List[FeedItem] = []
+        if doc.get("_id") == chunk_id and doc.get("kind") == "chunk" and not doc.get("_deleted"):
+            items = self._chunk_items(doc, position["since"], int(position.get("done", 0)),
+                                      plain_last=False)
+        self.resumed_chunk = chunk_id
+        self.since = position["since"]
+        self.caught_up = False
+        return items
+
+    def _chunk_items(self, doc: Dict[str, Any], seq: Any, done: int, *,
+                     plain_last: bool = True) -> List[FeedItem]:
+        """The selected messages of a chunk (after the first `done`), each with its position:
+        the chunk's feed position `seq` (after its last message, when `plain_last`) or inside it."""
         try:
             messages = [m for m, _ in expand(doc, None)]
             count = len(messages)
@@ -147,8 +170,8 @@ class ChangesFollower:
             message, data = parts[index]
             stored = self._decode(message, data)
             if stored is not None:
-                position = seq if index == count - 1 else {"since": before, "chunk": doc["_id"],
-                                                            "done": index + 1}
+                inside = index < count - 1 or not plain_last
+                position = {"since": seq, "chunk": doc["_id"], "done": index + 1} if inside else seq
                 items.append(FeedItem(position, stored))
         return items
 
