@@ -141,3 +141,14 @@ def test_a_door_off_the_search_cells_is_passed_with_the_clearance_measured_on_th
     path = CrowdPlanner(grid, SETTINGS).plan((1.0, 1.0), (7.0, 1.0), 0.0, DensityForecast.quiet(grid))
     in_door = np.abs(path.points[:, 0] - 4.0) < 0.15              # centres 3.875 and 4.125 m
     assert in_door.any() and np.all(np.abs(path.points[in_door, 1] - 2.55) <= 0.4 - 0.3 + 1e-9)
+
+
+def test_people_met_are_counted_over_the_band_whatever_side_of_a_corridor_the_path_takes():
+    grid = two_corridors()
+    forecast = forecast_of(grid, [0.0], [1.0])
+    planner = CrowdPlanner(grid, SETTINGS)
+    # the square around a point of the 1.5 m corridor (rows 32-37 of 0.25 m) spans 9 rows
+    # (2.25 m): 6 of them hold 1 person/m^2, so 2 m x 6/9 = 1.333 people per metre of path
+    for y in (8.3, 8.75, 9.2):               # bottom row 33 (rows 29-37), 35 (31-39), 36 (32-40)
+        path = planner.evaluate([(5.0, y), (15.0, y)], 0.0, forecast)
+        assert path.people_met == pytest.approx(10.0 * 2.0 * 6.0 / 9.0)

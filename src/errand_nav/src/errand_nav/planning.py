@@ -2,13 +2,16 @@
 travel time through its crowd plus a price on each person met, looked up at the time the robot is
 expected to get there.
 
-A cell at density rho (people / m^2) is crossed at the crowd speed (Weidmann's fundamental
-diagram for pedestrians, `crowd_speed`) and the robot meets the people in the band of
-2 x `meet_radius` it sweeps (rho x width x length). Cost of a path = expected travel time (each
-second near a wall weighted as in robot_common.gridplan's comfort term) + `person_cost` x
-expected people met. The search (robot_common.gridplan.cheapest_cells, A*) carries the expected
-clock along: a cell's cost is the forecast's at the time the robot would enter it; forecasts
-beyond `look_ahead` seconds from the start are held.
+A cell is crossed at the crowd speed (Weidmann's fundamental diagram for pedestrians,
+`crowd_speed`) and the robot meets the people in the band of 2 x `meet_radius` it sweeps; both
+use the forecast's density averaged over the square of side 2 x `meet_radius` around the cell
+(`band_forecast`: people per metre of path = that mean x the band's width; walls hold nobody, so
+a narrow corridor's crowd counts whole and a path gains nothing by hugging one side of a hall).
+Cost of a path = expected travel time (each second near a wall weighted as in
+robot_common.gridplan's comfort term) + `person_cost` x expected people met. The search
+(robot_common.gridplan.cheapest_cells, A*) carries the expected clock along: a cell's cost is the
+forecast's at the time the robot would enter it; forecasts beyond `look_ahead` seconds from the
+start are held.
 """
 import math
 from dataclasses import dataclass
@@ -21,7 +24,7 @@ from robot_common.errors import ConfigError
 from robot_common.gridplan import CellCosts, SearchGrid, cheapest_cells, path_length
 from robot_common.maps import GridMap
 
-__all__ = ["PlannerSettings", "PlannedPath", "CrowdPlanner", "crowd_speed"]
+__all__ = ["PlannerSettings", "PlannedPath", "CrowdPlanner", "crowd_speed", "band_forecast"]
 
 
 @dataclass(frozen=True)
@@ -96,9 +99,10 @@ class CrowdPlanner:
         Raises robot_common.gridplan.NoPathError when either end is not clear of walls or no
         path joins them."""
         ends = [self.search.end_cell("start", start), self.search.end_cell("goal", goal)]
-        cells, _ = cheapest_cells(self._costs(start_time, forecast), ends[0], ends[1],
+        band = band_forecast(forecast, self.settings.meet_radius)
+        cells, _ = cheapest_cells(self._costs(start_time, band), ends[0], ends[1],
                                   float(start_time))
-        return self.evaluate(self.search.polyline(cells, start, goal), start_time, forecast)
+        return self._evaluate(self.search.polyline(cells, start, goal), start_time, band)
 
     def _costs(self, start_time: float, forecast: DensityForecast) -> CellCosts:
         """Cost and pace per cell side at the forecast's times within the look-ahead."""
@@ -132,6 +136,9 @@ class CrowdPlanner:
         """Expected times, travel time, people met and cost of following `points` (N, 2) from
         `start_time` under `forecast` (the same model the search uses, sampled every half
         search cell along the path)."""
+        return self._evaluate(points, start_time, band_forecast(forecast, self.settings.meet_radius))
+
+    def _evaluate(self, points, start_time: float, forecast: DensityForecast) -> PlannedPath:
         settings = self.settings
         points = np.asarray(points, float).reshape(-1, 2)
         middles, pieces, arc = _samples(points, settings.cell_size / 2.0)
@@ -154,6 +161,21 @@ class CrowdPlanner:
             np.hypot(*np.diff(points, axis=0).T))]), arc, clock)
         cost = float(np.sum(seconds * (1.0 + extra))) + settings.person_cost * people
         return PlannedPath(points, times, path_length(points), float(clock[-1]), people, cost)
+
+
+def band_forecast(forecast: DensityForecast, radius: float) -> DensityForecast:
+    """The forecast with each cell's density the mean over the square of side about 2 x
+    `radius` around it (cells off the grid count as empty)."""
+    half = int(round(radius / forecast.resolution))
+    if half < 1:
+        return forecast
+    size = 2 * half + 1
+    padded = np.pad(forecast.grids, ((0, 0), (half + 1, half), (half + 1, half)))
+    total = padded.cumsum(axis=1).cumsum(axis=2)
+    window = total[:, size:, size:] - total[:, :-size, size:] - total[:, size:, :-size] + \
+        total[:, :-size, :-size]
+    return DensityForecast(forecast.origin, forecast.resolution, forecast.times,
+                           np.maximum(window / size ** 2, 0.0))
 
 
 def _samples(points: np.ndarray, step: float):
