@@ -15,7 +15,7 @@ from ros_harness import wait_until
 from traffic_gp.model import TrafficGP
 from traffic_gp.observations import Observations
 from traffic_gp.persistence import read_header
-from traffic_gp.srv import PredictCount, PredictRegion
+from traffic_gp.srv import PredictCount, PredictDensity, PredictRegion
 
 pytestmark = pytest.mark.ros
 NODE = "/traffic_gp"
@@ -129,6 +129,34 @@ def saved_model(tmp_path):
     return model, model.save(tmp_path / "model.npz"), save_map(building.grid, tmp_path / "map.yaml")
 
 
+def check_density_grids(rospy, model, hours, map_yaml):
+    """`~predict_density` at `hours`: the model's 0.5 m cell grid over the map, GPflow's
+    prediction at the centre of the cell holding (10.1, 6.6) the reference; too many stamps
+    refused."""
+    from robot_common.maps import load_map
+
+    grids = rospy.ServiceProxy(f"{NODE}/predict_density", PredictDensity)
+    answer = grids([sim_stamp(h, 0.0) for h in hours])
+    assert answer.success, answer.message
+    info, fine = answer.info, load_map(map_yaml)
+    assert info.resolution == pytest.approx(0.5)
+    assert (info.width, info.height) == (fine.width // 5, fine.height // 5)
+    density = np.asarray(answer.density).reshape(len(hours), info.height, info.width)
+    stddev = np.asarray(answer.stddev).reshape(density.shape)
+    col = int((10.1 - info.origin.position.x) // info.resolution)
+    row = int((6.6 - info.origin.position.y) // info.resolution)
+    for k, h in enumerate(hours):
+        assert density[k, row, col] == pytest.approx(model.predict(10.25, 6.75, h)[0], rel=1e-5)
+        assert stddev[k, row, col] == pytest.approx(model.predict_std(10.25, 6.75, h)[0],
+                                                    rel=1e-5)
+    # a model cell holding any wall map cell is outside the model: density 0
+    walls = fine.cells[:info.height * 5, :info.width * 5].reshape(
+        info.height, 5, info.width, 5).max(axis=(1, 3)) == OCCUPIED
+    assert walls.any() and np.all(density[:, walls] == 0)
+    refused = grids([rospy.Time(0)] * 49)
+    assert not refused.success and "49 times asked" in refused.message
+
+
 def test_a_saved_model_is_served_as_saved_without_training(roslaunch, rospy_node, saved_model):
     import rospy
 
@@ -144,6 +172,7 @@ def test_a_saved_model_is_served_as_saved_without_training(roslaunch, rospy_node
     # posterior in NumPy (no TensorFlow until it trains), GPflow's prediction is the reference
     expected = model.predict(10.25, 6.75, hours, 0.25)[0]
     assert answer.expected_count == pytest.approx(expected, rel=1e-6)
+    check_density_grids(rospy, model, [hours, hours + 2.0], map_yaml)
 
     # new observations: the node loads the trainable model and keeps learning from the file's state
     from geometry_msgs.msg import Point

@@ -34,6 +34,15 @@ UNREACHABLE_DENSITY = 1e-6   # people per m^2 where no watched place connects (g
 CHUNK = 20000          # prediction rows per block (memory stays small)
 
 
+def latent_grid(predict_latent, x, y, times) -> Tuple[np.ndarray, np.ndarray]:
+    """`predict_latent(x, y, t)` at every place (x, y) at each of `times`, one call: mean and
+    variance, arrays of shape (len(times), len(x))."""
+    x, y, times = (np.ravel(np.asarray(v, dtype=float)) for v in (x, y, times))
+    mean, var = predict_latent(np.tile(x, times.size), np.tile(y, times.size),
+                               np.repeat(times, x.size))
+    return np.reshape(mean, (times.size, x.size)), np.reshape(var, (times.size, x.size))
+
+
 class LatentPredictions:
     """Predictions from the Gaussian over the log density f(x, y, t); subclasses provide
     `_latent(inputs, full_cov)`, `_fitted()`, `period`, `random_state`, `dispersion_`
@@ -77,6 +86,11 @@ class LatentPredictions:
     def _latent_at(self, x, y, t, full_cov: bool = False):
         """`_latent` at places and times, with the unreachable places set (see the class)."""
         mean, cov = self._latent(self._inputs(x, y, t), full_cov=full_cov)
+        return self._served(x, y, t, mean, cov, full_cov)
+
+    def _served(self, x, y, t, mean, cov, full_cov: bool):
+        """The GP's latent Gaussian at places and times with the rate profile, the unreachable
+        places and the serving applied (see the class)."""
         x, y, t = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (x, y, t)))
         if self.profile_ is not None:
             mean = mean + self.profile_.log_rate(x, y, t)
@@ -101,6 +115,11 @@ class LatentPredictions:
     def predict_latent(self, x, y, t) -> Tuple[np.ndarray, np.ndarray]:
         """Mean and variance of the log density at places (x, y) and times t (hours of week)."""
         return self._latent_at(x, y, t)
+
+    def predict_latent_grid(self, x, y, times) -> Tuple[np.ndarray, np.ndarray]:
+        """`predict_latent` at every place (x, y) at each of `times`: mean and variance, arrays
+        of shape (len(times), len(x))."""
+        return latent_grid(self.predict_latent, x, y, times)
 
     def predict(self, x, y, t, exposure=1.0) -> np.ndarray:
         """Expected people counts (density for exposure 1 m^2)."""
@@ -244,13 +263,49 @@ class PosteriorSnapshot(LatentPredictions):
             kzx = self._kernel(self.inducing, inputs)
             cov = self._kernel(inputs, inputs) + kzx.T @ self._var_form @ kzx
             return self.constant + kzx.T @ self._mean_weights, cov
+        parts = [self._moments(self._kernel(self.inducing, inputs[start:start + CHUNK]))
+                 for start in range(0, max(len(inputs), 1), CHUNK)]
+        return tuple(np.concatenate(values) for values in zip(*parts))
+
+    def _moments(self, kzx: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """Mean and variance of the latent at the inputs whose K(Z, X) is `kzx`."""
         prior_var = sum(np.prod([f.variance for f in factors]) for factors in self.terms)
-        means, variances = [], []
-        for start in range(0, max(len(inputs), 1), CHUNK):
-            kzx = self._kernel(self.inducing, inputs[start:start + CHUNK])
-            means.append(self.constant + kzx.T @ self._mean_weights)
-            variances.append(prior_var + np.einsum("ij,ij->j", kzx, self._var_form @ kzx))
-        return np.concatenate(means), np.maximum(np.concatenate(variances), 1e-12)
+        variance = prior_var + np.einsum("ij,ij->j", kzx, self._var_form @ kzx)
+        return self.constant + kzx.T @ self._mean_weights, np.maximum(variance, 1e-12)
+
+    def _term_parts(self, inputs: np.ndarray, periodic: bool) -> List[np.ndarray]:
+        """Per kernel term, the product of its time factors (`periodic`) or of its space factors
+        between the inducing points and `inputs`."""
+        parts = []
+        for factors in self.terms:
+            product = np.ones((len(self.inducing), len(inputs)))
+            for factor in factors:
+                if bool(factor.period) == periodic:
+                    product *= factor.matrix(self.inducing, inputs)
+            parts.append(product)
+        return parts
+
+    def predict_latent_grid(self, x, y, times) -> Tuple[np.ndarray, np.ndarray]:
+        """As `LatentPredictions.predict_latent_grid`, faster: each kernel factor is over the
+        space or over the time, so the space factors are computed once per place, not once per
+        place and time."""
+        x, y, times = (np.ravel(np.asarray(v, dtype=float)) for v in (x, y, times))
+        space = self._inputs(x, y, np.zeros(x.size))
+        if not np.all(np.isfinite(times)):
+            raise ConfigError("prediction inputs must be finite numbers")
+        clock = np.zeros((times.size, self.inducing.shape[1]))    # the time column only is used
+        clock[:, -1] = np.mod(times, self.period)
+        clock_parts = self._term_parts(clock, periodic=True)
+        mean, var = np.empty((2, times.size, x.size))
+        step = CHUNK // (4 * len(self.terms)) + 1     # the terms' space parts stay small
+        for start in range(0, x.size, step):
+            space_parts = self._term_parts(space[start:start + step], periodic=False)
+            for k in range(times.size):
+                kzx = sum(part * when[:, k, None] for part, when in zip(space_parts, clock_parts))
+                mean[k, start:start + step], var[k, start:start + step] = self._moments(kzx)
+        mean, var = self._served(np.tile(x, times.size), np.tile(y, times.size),
+                                 np.repeat(times, x.size), mean.ravel(), var.ravel(), False)
+        return mean.reshape(times.size, x.size), var.reshape(times.size, x.size)
 
 
 def _kernel_terms(values: Dict[str, np.ndarray]) -> List[List[_Factor]]:

@@ -1,7 +1,8 @@
 """Answers the node serves, computed from a fitted model and the map's cells (no ROS).
 
 `CrowdQueries` answers "how many people at this place and time", "how many in this region",
-and builds crowd cost maps over a look-ahead window. Times are hours since Monday 00:00.
+"what density over the whole map at these times" (for planners that look ahead), and builds
+crowd cost maps over a look-ahead window. Times are hours since Monday 00:00.
 """
 from dataclasses import dataclass
 from typing import Optional, Sequence, Tuple
@@ -13,8 +14,11 @@ import traffic_gp.predictive as predictive
 from robot_common.cells import CellGrid
 from robot_common.errors import ConfigError
 from traffic_gp.errors import TrafficError
+from traffic_gp.posterior import latent_grid
 
 MAX_JOINT_CELLS = 1500   # above this, region sums treat cells as independent
+MAX_DENSITY_TIMES = 48   # times in one `density_grids` call
+NO_SPREAD = 1e-10        # latent variance at most this: a point forecast, no standard deviation
 
 
 @dataclass
@@ -40,7 +44,8 @@ def polygon_mask(cells: CellGrid, polygon: Sequence[Tuple[float, float]]) -> np.
 
 
 class CrowdQueries:
-    """Predictions over a map's cells from a fitted `TrafficGP` (or anything with its methods)."""
+    """Predictions over a map's cells from a fitted `TrafficGP` (or anything with its methods;
+    `predict_latent_grid` is optional: a saved posterior's is the fast one)."""
 
     def __init__(self, model, cells: CellGrid, *, level: float = 0.9, n_samples: int = 400):
         self.model, self.cells, self.level, self.n_samples = model, cells, level, n_samples
@@ -80,14 +85,35 @@ class CrowdQueries:
         return Estimate(expected, stddev, float(low), float(high), expected / total_area,
                         int(inside.size), total_area)
 
+    def _latent(self, times) -> Tuple[np.ndarray, np.ndarray]:
+        """Mean and variance of the log density of every cell at each time: (len(times), n_cells)."""
+        grid = getattr(self.model, "predict_latent_grid", None)   # optional (see the class)
+        if grid is None:
+            return latent_grid(self.model.predict_latent, self.cells.x, self.cells.y, times)
+        return grid(self.cells.x, self.cells.y, times)
+
     def densities(self, times: Sequence[float]) -> np.ndarray:
         """Expected density of every cell at each time: shape (len(times), n_cells)."""
-        times = np.asarray(times, float)
-        n = self.cells.n_cells
-        x = np.tile(self.cells.x, times.size)
-        y = np.tile(self.cells.y, times.size)
-        mean, var = self.model.predict_latent(x, y, np.repeat(times, n))
-        return predictive.expected_value(mean, var).reshape(times.size, n)
+        return predictive.expected_value(*self._latent(times))
+
+    def density_grids(self, times: Sequence[float]) -> Tuple[np.ndarray, np.ndarray]:
+        """Expected density (people per m^2) over the cell grid (`cells.coarse`, row 0 at its
+        origin) at each time, and its standard deviation: arrays (len(times), rows, cols).
+        Cells outside the model (a wall or unknown space in the cell) have density 0 and
+        standard deviation NaN; so do point forecasts (latent variance at most NO_SPREAD: a
+        baseline without a calibrated width, a place nobody can reach)."""
+        times = np.asarray(times, float).ravel()
+        if not 1 <= times.size <= MAX_DENSITY_TIMES:
+            raise TrafficError(f"{times.size} times asked: give 1 to {MAX_DENSITY_TIMES}")
+        if not np.all(np.isfinite(times)):
+            raise TrafficError(f"times must be finite, got {times.tolist()}")
+        mean, var = self._latent(times)
+        spread = np.where(var > NO_SPREAD, predictive.expected_std(mean, var), np.nan)
+        density = np.zeros((times.size,) + self.cells.shape)
+        stddev = np.full(density.shape, np.nan)
+        density[:, self.cells.rows, self.cells.cols] = predictive.expected_value(mean, var)
+        stddev[:, self.cells.rows, self.cells.cols] = spread
+        return density, stddev
 
     def cost_grid(self, now: float, *, lookahead_hours: float, step_hours: float,
                   saturation_density: float, wall_value: int = -1,

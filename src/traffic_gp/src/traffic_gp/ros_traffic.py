@@ -34,7 +34,14 @@ from traffic_gp.params import TrafficServerParams
 from traffic_gp.posterior import PosteriorSnapshot
 from traffic_gp.queries import CrowdQueries
 from traffic_gp.quick import BaselineForecast
-from traffic_gp.srv import PredictCount, PredictCountResponse, PredictRegion, PredictRegionResponse
+from traffic_gp.srv import (
+    PredictCount,
+    PredictCountResponse,
+    PredictDensity,
+    PredictDensityResponse,
+    PredictRegion,
+    PredictRegionResponse,
+)
 
 PEOPLE_COUNT_TYPE = "robot_common/PeopleCount"
 LEARNED_SUFFIX = ".learned.json"  # next to the model file: robots learned from, feed position
@@ -88,9 +95,11 @@ class TrafficServer:
       OK serving the GP, WARN serving the baselines and why, e.g. "GP 1.00x the best baseline
       on the held-out days (needs <= 0.9x): serving the baselines").
     Services: `~predict_count` (traffic_gp/PredictCount), `~predict_region`
-      (traffic_gp/PredictRegion), `~save_model` (std_srvs/Trigger), `~status` (std_srvs/Trigger:
-      which robots and how many rows and messages of each the model learned from, the settings
-      the model chose and why, what it serves where, its interval calibration).
+      (traffic_gp/PredictRegion), `~predict_density` (traffic_gp/PredictDensity: density grids
+      over the model's cells at up to 48 times), `~save_model` (std_srvs/Trigger), `~status`
+      (std_srvs/Trigger: which robots and how many rows and messages of each the model learned
+      from, the settings the model chose and why, what it serves where, its interval
+      calibration).
     """
 
     def __init__(self, config: TrafficServerParams):
@@ -141,6 +150,7 @@ class TrafficServer:
                                                 queue_size=1000)
         rospy.Service("~predict_count", PredictCount, self._predict_count)
         rospy.Service("~predict_region", PredictRegion, self._predict_region)
+        rospy.Service("~predict_density", PredictDensity, self._predict_density)
         rospy.Service("~save_model", Trigger, self._save_service)
         rospy.Service("~status", Trigger, lambda _req: TriggerResponse(True, self.learned_status()))
         threading.Thread(target=self._train_loop, name="crowd-training", daemon=True).start()
@@ -358,6 +368,17 @@ class TrafficServer:
             return PredictRegionResponse(success=False, message=str(err))
         return PredictRegionResponse(True, self._status(), est.expected, est.stddev, est.lower,
                                      est.upper, est.cells, est.area)
+
+    def _predict_density(self, req):
+        try:
+            with self._lock:
+                density, stddev = self._queries().density_grids(
+                    [self.now_hours(stamp) for stamp in req.stamps or [rospy.Time(0)]])
+                info = grid_to_msg(self.cells.coarse, self.config.frame_id).info
+        except (TrafficError, ConfigError) as err:
+            return PredictDensityResponse(success=False, message=str(err))
+        return PredictDensityResponse(True, self._status(), info, density.ravel().tolist(),
+                                      stddev.ravel().tolist())
 
     def _status(self) -> str:
         note = self.learner.serving_note()
