@@ -83,13 +83,40 @@ def test_too_many_or_no_or_non_finite_times_are_refused():
     assert queries.density_grids(np.zeros(MAX_DENSITY_TIMES))[0].shape == (48, 4, 6)
 
 
-def test_a_saved_posterior_predicts_grids_as_it_predicts_each_place_and_time(fitted, tmp_path):
+def random_posterior(n_inducing: int = 30, seed: int = 0) -> PosteriorSnapshot:
+    """A posterior of the saved layout (no TensorFlow): a sum of two products, SE(space) x
+    Periodic(24 h) and SE(space) x Periodic(1 h) x Periodic(24 h), random parameters."""
+    rng = np.random.default_rng(seed)
+    values = {".mean_function.c": np.array([-2.0]),
+              ".inducing_variable.Z": np.column_stack([rng.uniform(0, 15, (n_inducing, 2)),
+                                                       rng.uniform(0, 24, n_inducing)]),
+              ".q_mu": rng.normal(size=(n_inducing, 1)),
+              ".q_sqrt": 0.3 * rng.normal(size=(1, n_inducing * (n_inducing + 1) // 2))}
+    for term, periods in enumerate([(24.0,), (1.0, 24.0)]):
+        prefix = f".kernel.kernels[{term}].kernels"
+        values[f"{prefix}[0].variance"] = np.array(0.5)
+        values[f"{prefix}[0].lengthscales"] = np.array(3.0)
+        for k, period in enumerate(periods, start=1):
+            values[f"{prefix}[{k}].base_kernel.variance"] = np.array(1.0)
+            values[f"{prefix}[{k}].base_kernel.lengthscales"] = np.array(0.7)
+            values[f"{prefix}[{k}].period"] = np.array(period)   # softplus(period): any > 0
+    return PosteriorSnapshot({"params": {}}, values)
+
+
+def test_a_saved_posterior_predicts_grids_as_it_predicts_each_place_and_time():
     # the fast path (space factors once per place) against the row-by-row prediction
-    snapshot = PosteriorSnapshot.load(fitted.save(tmp_path / "model.npz"))
+    snapshot = random_posterior()
     x, y = np.array([1.5, 8.5, 12.5, 3.5]), np.array([2.5, 6.5, 1.5, 9.5])
     times = np.array([8.0, 12.4, 30.9])
     mean, var = snapshot.predict_latent_grid(x, y, times)
     slow_mean, slow_var = snapshot.predict_latent(np.tile(x, 3), np.tile(y, 3), np.repeat(times, 4))
     np.testing.assert_allclose(mean.ravel(), slow_mean, rtol=1e-10)
     np.testing.assert_allclose(var.ravel(), slow_var, rtol=1e-10)
-    assert mean.shape == (3, 4) and np.ptp(mean[:, 1]) > 0
+    assert mean.shape == (3, 4) and np.ptp(mean[:, 1]) > 0.01 and np.ptp(mean[0]) > 0.01
+    # more places than one block of the fast path
+    many = np.linspace(0.0, 15.0, 6000)      # blocks of 2501 places for 2 terms
+    mean, var = snapshot.predict_latent_grid(many, many[::-1], times[:2])
+    slow_mean, slow_var = snapshot.predict_latent(np.tile(many, 2), np.tile(many[::-1], 2),
+                                                  np.repeat(times[:2], 6000))
+    np.testing.assert_allclose(mean.ravel(), slow_mean, rtol=1e-10)
+    np.testing.assert_allclose(var.ravel(), slow_var, rtol=1e-10)
