@@ -5,7 +5,14 @@ import math
 import numpy as np
 import pytest
 
-from errand_nav.errand import Errand, ErrandRules, remaining_path, with_obstacles
+from errand_nav.errand import (
+    Errand,
+    ErrandRules,
+    nearest_clear,
+    remaining_path,
+    unmapped,
+    with_obstacles,
+)
 from errand_nav.places import choose_place
 from robot_common.maps import FREE, OCCUPIED, GridMap
 
@@ -101,3 +108,23 @@ def test_the_servers_own_confidence_floor_applies_only_when_set():
     stricter = choose_place("p", **answer(confidence=0.7), min_confidence=0.8)
     assert not stricter.sure and "0.80" in stricter.message
     assert choose_place("p", **answer(confidence=math.nan), min_confidence=0.8).sure
+
+
+def test_only_scan_points_the_map_does_not_explain_count_as_obstacles():
+    cells = np.full((40, 40), FREE, dtype=np.int8)
+    cells[:, 30:] = OCCUPIED                                   # a wall from x = 3.0 m
+    grid = GridMap(cells, 0.1)
+    points = np.array([[2.99, 1.0], [2.0, 1.0], [2.9, 2.0]])   # on the wall, in the hall, near it
+    assert unmapped(grid, points, 0.15).tolist() == [[2.0, 1.0]]
+
+
+def test_an_end_where_the_robot_does_not_fit_moves_to_the_nearest_clear_spot():
+    from robot_common.gridplan import SearchGrid
+    cells = np.full((40, 40), FREE, dtype=np.int8)
+    cells[:, 30:] = OCCUPIED                                   # a wall from x = 3.0 m
+    search = SearchGrid(GridMap(cells, 0.1), clearance=0.3, cell_size=0.1)
+    assert nearest_clear(search, (1.0, 2.0), 0.6) == (1.0, 2.0)
+    x, y = nearest_clear(search, (2.9, 2.02), 0.6)             # 0.1 m from the wall
+    # the nearest cell whose centre is 3 cells (0.3 m, centre to centre) from the wall's first
+    assert x == pytest.approx(2.75) and y == pytest.approx(2.05)
+    assert nearest_clear(search, (3.5, 2.0), 0.6) == (3.5, 2.0)    # in the wall: none near

@@ -7,13 +7,14 @@ crowd forecast is due again. `with_obstacles` marks laser points on a copy of th
 re-plan goes round what blocked the path (move_base's obstacle layer does the same)."""
 import math
 from dataclasses import dataclass, field
-from typing import Optional, Sequence
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
 from robot_common.maps import FREE, OCCUPIED, GridMap
 
-__all__ = ["Errand", "ErrandRules", "Verdict", "with_obstacles", "remaining_path"]
+__all__ = ["Errand", "ErrandRules", "Verdict", "with_obstacles", "remaining_path", "unmapped",
+           "nearest_clear"]
 
 
 @dataclass
@@ -48,6 +49,14 @@ class Errand:
     last_progress: float = 0.0
     last_plan: float = 0.0
     replans: int = 0
+    # what the laser showed in the way when the path was blocked (map frame), kept for the
+    # errand so that a re-plan never returns to a way already found blocked
+    obstacles: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+    def saw_blocking(self, points: np.ndarray) -> np.ndarray:
+        """Add laser points seen in the way; all of them so far."""
+        self.obstacles = np.vstack([self.obstacles, np.asarray(points, float).reshape(-1, 2)])
+        return self.obstacles
 
     def follow(self, path: np.ndarray, now: float) -> None:
         """A new path to follow from now on (progress is measured along it)."""
@@ -99,6 +108,40 @@ def remaining_path(path: np.ndarray, xy: Sequence[float]) -> np.ndarray:
     nearest = int(np.argmin(gaps))
     return np.vstack([np.asarray(xy, float)[None], path[nearest + 1:]]) \
         if nearest + 1 < len(path) else np.vstack([np.asarray(xy, float)[None], path[-1:]])
+
+
+def nearest_clear(search, point: Sequence[float], reach: float) -> Tuple[float, float]:
+    """`point` itself when the robot fits there on `search` (a robot_common.gridplan.SearchGrid),
+    else the centre of the nearest search cell where it fits within `reach` m (a robot that
+    stopped close to what blocked it plans from the nearest clear spot, as a goal a little
+    too close to a wall is taken at the nearest clear one); `point` when there is none."""
+    coarse = search.coarse
+    row, col = coarse.world_to_cell(point[0], point[1])
+    if coarse.inside(row, col) and search.passable[row, col]:
+        return float(point[0]), float(point[1])
+    cells = int(math.ceil(reach / coarse.resolution))
+    rows, cols = np.mgrid[max(0, row - cells):min(coarse.height, row + cells + 1),
+                          max(0, col - cells):min(coarse.width, col + cells + 1)]
+    if rows.size == 0:
+        return float(point[0]), float(point[1])
+    xs, ys = coarse.cell_to_world(rows, cols)
+    gap = np.hypot(xs - point[0], ys - point[1])
+    gap[~search.passable[rows, cols] | (gap > reach)] = np.inf
+    best = np.unravel_index(int(np.argmin(gap)), gap.shape)
+    if not np.isfinite(gap[best]):
+        return float(point[0]), float(point[1])
+    return float(xs[best]), float(ys[best])
+
+
+def unmapped(grid: GridMap, points: np.ndarray, margin: float) -> np.ndarray:
+    """The points (N, 2) of a scan that the map does not explain: free cells all round them
+    within `margin` m (a beam ending on a mapped wall is not an obstacle to add)."""
+    points = np.asarray(points, float).reshape(-1, 2)
+    keep = np.ones(len(points), bool)
+    for dx in (-margin, 0.0, margin):
+        for dy in (-margin, 0.0, margin):
+            keep &= grid.is_free(points[:, 0] + dx, points[:, 1] + dy)
+    return points[keep]
 
 
 def with_obstacles(grid: GridMap, points: np.ndarray, radius: float,

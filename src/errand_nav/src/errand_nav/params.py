@@ -47,6 +47,8 @@ class ErrandServerParams(NodeConfig):
                                        "obstacles when the path is blocked", minimum=0.0)
     obstacle_radius: float = param(0.3, "m round each such point kept out of the new path",
                                    minimum=0.0)
+    snap_radius: float = param(0.6, "m: a start or goal where the robot does not fit is taken at "
+                                    "the nearest spot within this where it does", minimum=0.0)
     check_rate: float = param(5.0, "looks at the errand per second (feedback at the same rate)",
                               minimum=0.1)
     goal_tolerance: float = param(_RULES.goal_tolerance, "m from the goal counts as reached",

@@ -15,7 +15,7 @@ from nav_msgs.srv import GetPlan, GetPlanResponse
 from sensor_msgs.msg import LaserScan
 from std_srvs.srv import SetBool
 
-from errand_nav.errand import Errand, remaining_path, with_obstacles
+from errand_nav.errand import Errand, nearest_clear, remaining_path, unmapped, with_obstacles
 from errand_nav.forecast import DensityForecast
 from errand_nav.params import ErrandServerParams
 from errand_nav.planning import CrowdPlanner, PlannedPath
@@ -43,8 +43,9 @@ class ErrandServer:
     what the laser (`scan`) shows ahead, at most ~max_replans times; every ~replan_period s the
     crowd forecast is asked again and a plan better by ~switch_gain is taken. Result: succeeded
     within ~goal_tolerance of the goal; aborted with the reason (no path, blocked with no other
-    path, no robot pose); preempted by a new goal or a cancel (the controller is stopped through
-    its ~controller_enable service).
+    path, no robot pose); preempted by a new goal or a cancel. Once a goal has ended (other than
+    by a new goal) the controller is switched off through ~controller_enable (std_srvs/SetBool),
+    as move_base stops commanding; a new goal switches it on.
 
     Also: ~make_plan (nav_msgs/GetPlan; start.header.stamp is the departure time, zero: now;
     an empty start frame: the robot's pose), ~go_to_place (errand_nav/GoToPlace: a phrase
@@ -186,6 +187,8 @@ class ErrandServer:
             planner = CrowdPlanner(with_obstacles(
                 planner.grid, obstacles, self.config.obstacle_radius, keep_clear=start,
                 keep_radius=self.settings.clearance + 0.05), self.settings)
+        start = nearest_clear(planner.search, start, self.config.snap_radius)
+        goal = nearest_clear(planner.search, goal, self.config.snap_radius)
         return planner.plan(start, goal, departure,
                             self.forecast(planner, start, goal, departure))
 
@@ -266,7 +269,7 @@ class ErrandServer:
         rospy.loginfo(f"errand_server: {outcome}: {text}")
         with self.lock:
             self.status, self.current = f"{outcome}: {text}", None
-        if outcome != "succeeded" and outcome != "replaced":
+        if outcome != "replaced":       # like move_base: no command once a goal has ended
             self.controller(False)
         if outcome == "succeeded":
             self.server.set_succeeded(MoveBaseResult(), text)
@@ -297,6 +300,7 @@ class ErrandServer:
         try:
             target = self.in_map(goal.target_pose)
             planned = self.plan(pose[:2], target, now)
+            target = tuple(planned.points[-1])      # where it fits, within ~snap_radius
         except (NoPathError, tf2_ros.TransformException) as err:
             return self.finish("aborted", f"no path: {err}")
         errand = Errand(target, self.rules, now)
@@ -326,14 +330,18 @@ class ErrandServer:
             if errand.replans > self.rules.max_replans:
                 return "aborted", (f"blocked: {verdict.reason}; gave up after "
                                    f"{self.rules.max_replans} new paths")
-            seen = self.scan_points(pose[:2], self.config.obstacle_range)
+            with self.lock:
+                grid = self.planner.grid
+            new = unmapped(grid, self.scan_points(pose[:2], self.config.obstacle_range), 0.15)
+            seen = errand.saw_blocking(new)
             try:
                 planned = self.plan(pose[:2], errand.goal, now, obstacles=seen)
             except NoPathError as err:
                 return "aborted", (f"blocked at ({pose[0]:.1f}, {pose[1]:.1f}): "
                                    f"{verdict.reason}; no other path: {err}")
-            self.follow(errand, planned, now, f"re-planned round what blocked it "
-                                              f"({verdict.reason})")
+            self.follow(errand, planned, now, f"re-planned at ({pose[0]:.1f}, {pose[1]:.1f}) "
+                                              f"round {len(new)} laser points the map lacks "
+                                              f"({len(seen)} this errand; {verdict.reason})")
         elif verdict.action == "forecast":
             self.reconsider(errand, pose, now)
         return None
