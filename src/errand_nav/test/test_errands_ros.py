@@ -3,7 +3,8 @@ launch/errands_sim.launch (robot_sim's building_sim driven by cmd_vel, lfd_contr
 reward_controller in path mode, errand_server), on a small floor of two corridors round a block
 that holds a closed room. Reach, preempt, cancel, an unreachable goal, a blocked corridor
 (re-planned round through the other one; aborted when both are blocked), and goals by phrase
-through region_search's real nodes (a sure phrase and one it is not sure of).
+through region_search's real nodes (a place it is sure of; two printers it cannot tell apart:
+asked back with the candidates, nothing sent).
 
 The robot drives with a hand-weighted hallway reward: these tests are about the action interface,
 not about what was learned (bench/errand_nav and bench/lfd_controller measure that)."""
@@ -60,7 +61,7 @@ def errands(roscore, rospy_node, tmp_path_factory, workspace_root):
     launches = LaunchSet(roscore, folder / "logs")
     launch = launches(str(workspace_root / "launch" / "errands_sim.launch"), map_yaml=str(map_yaml), people=0,
                       start=f"[{START[0]}, {START[1]}, 0.0]", reward_file=str(reward),
-                      errand_params="{blocked_after: 6.0, replan_period: 30.0}")
+                      errand_params="{blocked_after: 6.0, replan_period: 30.0, min_confidence: 0.6}")
     launch.wait_for_services(["/errand_server/make_plan", "/errand_server/go_to_place",
                               "/building_sim/clear_obstacles"], timeout=120)
     client = actionlib.SimpleActionClient("/move_base", MoveBaseAction)
@@ -215,3 +216,56 @@ def test_a_blocked_corridor_is_replanned_round_and_aborted_when_no_way_is_left(e
 def _ends_at(plan, xy):
     end = plan.poses[-1].pose.position if plan.poses else None
     return end is not None and math.hypot(end.x - xy[0], end.y - xy[1]) < 1e-6
+
+
+def write_vectors(path):
+    """A hand-made word2vec space (axes: paper, drink, rest) whose answers are known."""
+    words = {"print": 0, "printer": 0, "paper": 0, "poster": 0, "water": 1, "fountain": 1,
+             "drink": 1, "drinking": 1, "thirsty": 1, "lounge": 2, "sofa": 2, "rest": 2}
+    lines = [f"{len(words) + 1} 3"]
+    for word, axis in words.items():
+        vector = [0.05, 0.05, 0.05]
+        vector[axis] = 1.0
+        lines.append(word + " " + " ".join(f"{v:.3f}" for v in vector))
+    lines.append("room 0.300 0.300 0.300")
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_a_goal_by_phrase_goes_where_region_search_is_sure_and_asks_back_where_not(
+        errands, roslaunch, tmp_path):
+    import json
+
+    from errand_nav.srv import GoToPlace
+    write_vectors(tmp_path / "vectors.txt")
+    places = {"printer_north": NORTH_EAST, "printer_south": SOUTH_EAST,
+              "water_fountain": (1.0, 4.25)}
+    (tmp_path / "labels.json").write_text(json.dumps(
+        {name: {"x": x, "y": y} for name, (x, y) in places.items()}))
+    launch = roslaunch("region_search", "region_search.launch", backend="word2vec",
+                       source="pretrained", pretrained_path=str(tmp_path / "vectors.txt"),
+                       cache_dir=str(tmp_path / "cache"), remove_components=-1,
+                       labels_path=str(tmp_path / "labels.json"), layer_service="")
+    launch.wait_for_services(["/region_recommender/recommend"], timeout=90)
+    wait_until(lambda: rospy.has_param("/embedding_server/active_backend"), 120,
+               what="the embedding model to be ready")
+    go = rospy.ServiceProxy("/errand_server/go_to_place", GoToPlace)
+    sent = []
+    rospy.Subscriber("/move_base/goal", rospy.AnyMsg, sent.append, queue_size=5)
+    errands.put(START)
+    looked = go(phrase="the water fountain", dry_run=True)
+    assert looked.success and looked.label == "water_fountain", looked
+    assert (looked.goal.pose.position.x, looked.goal.pose.position.y) == pytest.approx((1.0, 4.25))
+    # Two printers: region_search's confidence in either is about 0.5, below the 0.6 this
+    # errand server is set to drive at
+    unsure = go(phrase="a printer", dry_run=False)
+    assert not unsure.success and unsure.message.startswith("not sure"), unsure
+    assert unsure.confidence < 0.6
+    assert set(unsure.candidates[:2]) == {"printer_north", "printer_south"}, unsure
+    assert "candidates: printer_" in unsure.message
+    sure = go(phrase="where can I get a drink of water?", dry_run=False)
+    assert sure.success and sure.label == "water_fountain" and sure.confidence >= 0.6, sure
+    wait_until(lambda: len(sent) == 1, 30, what="the goal on the move_base action")
+    wait_until(lambda: errands.plan is not None and _ends_at(errands.plan, (1.0, 4.25)), 60,
+               what="a plan to the water fountain")
+    errands.client.cancel_all_goals()
+    assert len(sent) == 1                      # nothing was sent for the unsure phrase
