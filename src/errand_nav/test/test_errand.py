@@ -8,6 +8,7 @@ import pytest
 from errand_nav.errand import (
     Errand,
     ErrandRules,
+    at_hour_of_week,
     nearest_clear,
     remaining_path,
     unmapped,
@@ -128,3 +129,13 @@ def test_an_end_where_the_robot_does_not_fit_moves_to_the_nearest_clear_spot():
     # the nearest cell whose centre is 3 cells (0.3 m, centre to centre) from the wall's first
     assert x == pytest.approx(2.75) and y == pytest.approx(2.05)
     assert nearest_clear(search, (3.5, 2.0), 0.6) == (3.5, 2.0)    # in the wall: none near
+
+
+def test_an_hour_of_the_week_is_counted_from_monday_midnight_utc():
+    import calendar
+    monday = calendar.timegm((2026, 11, 23, 0, 0, 0))          # a Monday, 00:00 UTC
+    wednesday = calendar.timegm((2026, 11, 25, 17, 5, 0))
+    sunday = calendar.timegm((2026, 11, 29, 23, 59, 0))
+    assert at_hour_of_week(wednesday, 0.0) == monday
+    assert at_hour_of_week(sunday, 58.5) == monday + 58.5 * 3600.0   # Wednesday 10:30
+    assert at_hour_of_week(monday, 1.0) == monday + 3600.0     # Monday 00:00 is its own week

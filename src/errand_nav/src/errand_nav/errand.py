@@ -14,7 +14,16 @@ import numpy as np
 from robot_common.maps import FREE, OCCUPIED, GridMap
 
 __all__ = ["Errand", "ErrandRules", "Verdict", "with_obstacles", "remaining_path", "unmapped",
-           "nearest_clear"]
+           "nearest_clear", "at_hour_of_week"]
+
+WEEK = 7 * 86400.0
+
+
+def at_hour_of_week(now: float, hour: float) -> float:
+    """The time (s since the epoch) at `hour` hours after Monday 00:00 UTC of the week holding
+    `now` (the epoch, 1970-01-01, was a Thursday)."""
+    monday = math.floor((now + 3 * 86400.0) / WEEK) * WEEK - 3 * 86400.0
+    return monday + hour * 3600.0
 
 
 @dataclass

@@ -37,6 +37,10 @@ class ErrandServerParams(NodeConfig):
     min_confidence: float = param(0.0, "~go_to_place drives only at this confidence or more (0: "
                                        "region_search's own \"not sure\" level decides)",
                                   minimum=0.0)
+    plan_hour_of_week: float = param(-1.0, "< 0: plan for the crowd of the clock's time; >= 0: "
+                                           "as if the robot left at this hour of the week (0: "
+                                           "Monday 00:00 UTC; for simulations that hold the "
+                                           "crowd at one hour, as robot_sim's crowd_hour does)")
     forecast_step: float = param(120.0, "s between the crowd forecast's times (look-ahead grid)",
                                  minimum=1.0)
     forecast_horizon: float = param(1800.0, "s ahead the crowd forecast reaches at most "
@@ -93,5 +97,8 @@ class ErrandServerParams(NodeConfig):
                                   for f in dataclasses.fields(PlannerSettings)})
 
     def check(self) -> None:
+        if self.plan_hour_of_week >= 168.0:
+            raise ConfigError(f"~plan_hour_of_week must be below 168 (a week), got "
+                              f"{self.plan_hour_of_week}")
         if not self.action_ns:
             raise ConfigError("~action_ns must not be empty")

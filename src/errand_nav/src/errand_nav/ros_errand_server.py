@@ -15,7 +15,7 @@ from nav_msgs.srv import GetPlan, GetPlanResponse
 from sensor_msgs.msg import LaserScan
 from std_srvs.srv import SetBool
 
-from errand_nav.errand import Errand, nearest_clear, remaining_path, unmapped, with_obstacles
+from errand_nav.errand import Errand, at_hour_of_week, nearest_clear, remaining_path, unmapped, with_obstacles
 from errand_nav.forecast import DensityForecast
 from errand_nav.params import ErrandServerParams
 from errand_nav.planning import CrowdPlanner, PlannedPath
@@ -61,8 +61,12 @@ class ErrandServer:
         self.scan: Optional[LaserScan] = None
         self.status, self.forecast_note = "waiting for a goal", "no forecast asked yet"
         self.current: Optional[PlannedPath] = None
+        self.crowd_offset = 0.0       # crowd time - clock time (~plan_hour_of_week)
 
     def setup(self) -> "ErrandServer":
+        if self.config.plan_hour_of_week >= 0:
+            now = rospy.Time.now().to_sec()
+            self.crowd_offset = at_hour_of_week(now, self.config.plan_hour_of_week) - now
         self.tf_buffer = tf2_ros.Buffer(rospy.Duration(30.0))
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
         self.plan_pub = rospy.Publisher("~plan", Path, queue_size=1, latch=True)
@@ -231,7 +235,7 @@ class ErrandServer:
         self.path_pub.publish(msg)
 
     def on_make_plan(self, request):
-        departure = request.start.header.stamp.to_sec() or rospy.Time.now().to_sec()
+        departure = request.start.header.stamp.to_sec() or self.crowd_time(rospy.Time.now())
         try:
             if request.start.header.frame_id:
                 start = self.in_map(request.start)
@@ -246,6 +250,10 @@ class ErrandServer:
             return GetPlanResponse()
         rospy.loginfo(f"errand_server: ~make_plan: {self.describe(planned)}")
         return GetPlanResponse(plan=self.path_msg(planned))
+
+    def crowd_time(self, stamp) -> float:
+        """The time (s) whose crowd a plan made at clock time `stamp` is for."""
+        return stamp.to_sec() + self.crowd_offset
 
     @staticmethod
     def describe(planned: PlannedPath) -> str:
@@ -299,7 +307,7 @@ class ErrandServer:
         now = rospy.Time.now().to_sec()
         try:
             target = self.in_map(goal.target_pose)
-            planned = self.plan(pose[:2], target, now)
+            planned = self.plan(pose[:2], target, now + self.crowd_offset)
             target = tuple(planned.points[-1])      # where it fits, within ~snap_radius
         except (NoPathError, tf2_ros.TransformException) as err:
             return self.finish("aborted", f"no path: {err}")
@@ -335,7 +343,8 @@ class ErrandServer:
             new = unmapped(grid, self.scan_points(pose[:2], self.config.obstacle_range), 0.15)
             seen = errand.saw_blocking(new)
             try:
-                planned = self.plan(pose[:2], errand.goal, now, obstacles=seen)
+                planned = self.plan(pose[:2], errand.goal, now + self.crowd_offset,
+                                    obstacles=seen)
             except NoPathError as err:
                 return "aborted", (f"blocked at ({pose[0]:.1f}, {pose[1]:.1f}): "
                                    f"{verdict.reason}; no other path: {err}")
@@ -352,11 +361,12 @@ class ErrandServer:
         with self.lock:
             planner = self.planner
         try:
-            forecast = self.forecast(planner, pose[:2], errand.goal, now)
-            fresh = planner.plan(pose[:2], errand.goal, now, forecast)
+            departure = now + self.crowd_offset
+            forecast = self.forecast(planner, pose[:2], errand.goal, departure)
+            fresh = planner.plan(pose[:2], errand.goal, departure, forecast)
         except NoPathError:
             return
-        kept = planner.evaluate(remaining_path(errand.path, pose[:2]), now, forecast)
+        kept = planner.evaluate(remaining_path(errand.path, pose[:2]), departure, forecast)
         if fresh.cost < (1.0 - self.config.switch_gain) * kept.cost:
             self.follow(errand, fresh, now, f"the crowd forecast changed: {fresh.cost:.0f} "
                                             f"against {kept.cost:.0f} s-equivalent")
