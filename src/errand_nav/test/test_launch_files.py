@@ -20,7 +20,7 @@ def test_the_robot_launch_brings_up_the_whole_robot_and_the_recorder_on_request(
     assert recording - nodes == {"/ros_mongo_server"}
 
 
-@pytest.mark.parametrize("crowd, service", [("true", "/traffic_gp/predict_density"),
+@pytest.mark.parametrize("crowd, service", [("true", "traffic_gp/predict_density"),
                                             ("false", "")])
 def test_the_errand_server_is_told_where_the_crowd_forecast_is(crowd, service):
     params = yaml.safe_load(roslaunch("--dump-params", "errand_nav", "errands.launch",
@@ -40,3 +40,15 @@ def test_the_simulation_launch_adds_the_simulated_robot(workspace_root):
                                       "errand_params:={blocked_after: 3.0}"))
     assert params["/errand_server/blocked_after"] == 3.0
     assert params["/errand_server/density_service"] == ""
+
+
+def test_a_second_simulated_robot_lives_in_its_namespace_with_its_own_frames(workspace_root):
+    launch = str(workspace_root / "launch" / "errands_sim.launch")
+    args = ["ns:=/errand_robot", "frame_prefix:=errand_robot/"]
+    nodes = set(roslaunch("--nodes", launch, *args).split())
+    assert nodes == {"/errand_robot/map_publisher", "/errand_robot/building_sim",
+                     "/errand_robot/reward_controller", "/errand_robot/errand_server"}
+    params = yaml.safe_load(roslaunch("--dump-params", launch, *args))
+    assert params["/errand_robot/building_sim/base_frame"] == "errand_robot/base_link"
+    assert params["/errand_robot/errand_server/base_frame"] == "errand_robot/base_link"
+    assert params["/errand_robot/reward_controller/frame"] == "errand_robot/odom"

@@ -26,10 +26,10 @@ class ErrandServerParams(NodeConfig):
     controller_frame: str = param("", "frame of the paths sent to the controller on `path` (the "
                                       "frame of its odom; \"\": map_frame)")
     base_frame: str = param("base_link", "the robot's frame (its pose: tf map_frame -> base_frame)")
-    density_service: str = param("/traffic_gp/predict_density", "traffic_gp's density forecast "
+    density_service: str = param("traffic_gp/predict_density", "traffic_gp's density forecast "
                                  "service (traffic_gp/PredictDensity); \"\": plan for travel "
                                  "time alone")
-    recommend_service: str = param("/region_recommender/recommend", "region_search's "
+    recommend_service: str = param("region_recommender/recommend", "region_search's "
                                    "RecommendRegion service (~go_to_place)")
     controller_enable: str = param("reward_controller/enable", "the controller's std_srvs/SetBool "
                                    "switch: off on cancel and abort, on with a new goal")
