@@ -2,4 +2,4 @@
 from catkin_pkg.python_setup import generate_distutils_setup
 from setuptools import setup
 
-setup(**generate_distutils_setup(packages=["errand_nav"], package_dir={"": "src"}))
+setup(**generate_distutils_setup(packages=["errand_nav", "errand_nav.sim"], package_dir={"": "src"}))
