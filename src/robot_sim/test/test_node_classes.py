@@ -113,3 +113,14 @@ def test_building_sim_builds_its_floor_people_and_robot_from_the_parameters(tmp_
         BuildingSimParams.from_mapping({"dt": 0.0})
     with pytest.raises(ConfigError, match=r"~start is \[x, y, yaw\]"):
         BuildingSimParams.from_mapping({"start": [1.0, 2.0]})
+
+
+def test_every_node_on_a_generated_floor_takes_the_loop_layout():
+    loop = {"layout": "loop"}
+    assert MapPublisher(MapPublisherParams(**loop)).grid.origin == (-2.5, 0.0, 0.0)
+    assert SensorSim(SensorSimParams(scan_beams=8, **loop)).sensors.grid.origin[0] == -2.5
+    assert BuildingSim(BuildingSimParams(people=0, **loop)).sim.planner.grid.origin[0] == -2.5
+    names = PeopleSimNode(PeopleSimParams(cell_size=1.0, **loop)).sim.layout.names
+    assert names[2:] == ["west_corridor", "north_corridor"]
+    assert PeopleSimNode(PeopleSimParams(cell_size=1.0)).sim.layout.names == ["main_hall",
+                                                                              "back_hall"]

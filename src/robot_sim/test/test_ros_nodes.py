@@ -134,3 +134,54 @@ def test_building_sim_drives_on_cmd_vel_sees_an_added_obstacle_and_reports_the_c
     finally:
         for sub in subs:
             sub.unregister()
+
+
+def test_building_sim_in_a_namespace_keeps_its_topics_and_frames_there_on_the_loop_floor(
+        roslaunch, rospy_node, tmp_path):
+    import tf2_ros
+    from nav_msgs.msg import OccupancyGrid, Odometry
+    from sensor_msgs.msg import LaserScan
+
+    from robot_common.msg import People
+    from ros_harness import wait_until
+
+    frames = {"odom_frame": "errand_robot/odom", "base_frame": "errand_robot/base_link",
+              "laser_frame": "errand_robot/laser"}
+    args = "\n".join(f'      <arg name="{key}" value="{value}"/>' for key, value in
+                     dict(frames, layout="loop", people=1).items())
+    launch = tmp_path / "second_robot.launch"
+    launch.write_text(f"""<launch>
+  <group ns="errand_robot">
+    <include file="$(find robot_sim)/launch/building_sim.launch">
+{args}
+    </include>
+  </group>
+</launch>
+""")
+    sim = roslaunch(str(launch))
+    ours = ["/errand_robot/odom", "/errand_robot/scan", "/errand_robot/people",
+            "/errand_robot/map", "/errand_robot/cmd_vel_applied",
+            "/errand_robot/building_sim/status"]
+    sim.wait_for_topics(ours, timeout=90)
+    sim.wait_for_subscribers(["/errand_robot/cmd_vel", "/errand_robot/initialpose"], timeout=90)
+    published = {name for name, _ in rospy_node.get_published_topics()}
+    assert not published & {"/odom", "/scan", "/people", "/map", "/cmd_vel_applied"}
+    grid = rospy_node.wait_for_message("/errand_robot/map", OccupancyGrid, timeout=60)
+    # the loop floor: 29.9 m x 15.6 m from x = -2.5 m (see test_building)
+    assert (grid.info.width, grid.info.height) == (299, 156)
+    assert grid.info.origin.position.x == pytest.approx(-2.5)
+    odom = rospy_node.wait_for_message("/errand_robot/odom", Odometry, timeout=60)
+    assert (odom.header.frame_id, odom.child_frame_id) == (frames["odom_frame"],
+                                                           frames["base_frame"])
+    scan = rospy_node.wait_for_message("/errand_robot/scan", LaserScan, timeout=60)
+    people = rospy_node.wait_for_message("/errand_robot/people", People, timeout=60)
+    assert scan.header.frame_id == frames["laser_frame"]
+    assert people.header.frame_id == frames["odom_frame"]
+    buffer = tf2_ros.Buffer()
+    listener = tf2_ros.TransformListener(buffer)
+    try:        # map -> odom and base -> laser are static, odom -> base from each step
+        wait_until(lambda: buffer.can_transform("map", frames["laser_frame"], rospy_node.Time(0)),
+                   60, what="map -> laser through the configured frames")
+        assert not buffer.can_transform("map", "laser", rospy_node.Time(0))
+    finally:
+        listener.unregister()

@@ -6,19 +6,41 @@ extras). Layout, with x to the right and y up:
     +------+------+-- ... --+------+-----+
     | room | room |         | room |  b  |
     +--  --+--  --+-- ... --+--  --+  a  |
-    |            main hall               c  |   <- busy
+    |           main hall             c  |   <- busy
     +--  --+--  --+-- ... --+--  --+  k  |
     | room | room |         | room |     |   <- back hall: quiet
     +------+------+-- ... --+------+-----+
+
+and with `loop=True` (the same floor, nothing moved, on a map grown west and north):
+
+    +----------------------------------------+
+    |         north corridor (quiet)         |
+    |   +------+------+-- ... --+------+     |
+    | w | room | room |         | room |  b  |
+    | e +--  --+--  --+-- ... --+--  --+  a  |
+    | s             main hall             c  |   <- busy
+    +---+--  --+--  --+-- ... --+--  --+  k  |
+        | room | room |         | room |     |   <- back hall: quiet
+        +------+------+-- ... --+------+-----+
 
 Rooms open onto the main hall through doors; the back hall runs along the right end. Each room
 has a semantic label (kitchen, printer_room, classroom_101 ...) and objects placed from its kind;
 landmarks (water_fountain, vending_machines, ...) stand in the halls. Everything follows from
 `seed`.
+
+`loop=True` gives the floor a second way from the main hall's west end to the back hall: a
+west corridor from the main hall's west end (open over the hall's width) up to a north corridor
+beyond the top rooms' outer wall, which runs the floor's whole width and meets the back hall,
+extended up through its north wall. Both are quiet halls (`busy` as the back hall's), so the
+way round is longer but meets fewer people than the main hall at a rush. The map's origin x
+becomes negative (-2.5 m with the defaults: whole 0.5 m people cells, so the people model's
+cells of the old floor stay where they were); rooms, labels, objects and the main hall are
+those of `loop=False`, whose floor does not change.
 """
 import json
+import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -111,8 +133,9 @@ class Building:
 def generate_building(seed: int = 0, *, rooms_per_side: int = 5, room_width: float = 5.0,
                       room_depth: float = 5.0, hall_width: float = 3.0,
                       back_hall_width: float = 2.0, wall: float = 0.2,
-                      resolution: float = 0.1) -> Building:
-    """A floor with `2 * rooms_per_side` rooms on a main hall and a back hall at its right end."""
+                      resolution: float = 0.1, loop: bool = False) -> Building:
+    """A floor with `2 * rooms_per_side` rooms on a main hall and a back hall at its right end;
+    `loop`: plus west and north corridors `back_hall_width` wide (see the module docstring)."""
     if rooms_per_side < 1:
         raise ValueError(f"rooms_per_side must be at least 1, got {rooms_per_side}")
     rng = np.random.default_rng(seed)
@@ -121,11 +144,6 @@ def generate_building(seed: int = 0, *, rooms_per_side: int = 5, room_width: flo
     shape = (int(round(height / resolution)), int(round(width / resolution)))
     cells = np.full(shape, OCCUPIED, dtype=np.int8)
     grid = GridMap(cells, resolution, (0.0, 0.0, 0.0), {"source": f"generated seed={seed}"})
-
-    def carve(box: Box) -> None:
-        (r0, c0), (r1, c1) = [grid.world_to_cell(x, y) for x, y in ((box[0], box[1]),
-                                                                      (box[2], box[3]))]
-        cells[max(r0, 0):r1, max(c0, 0):c1] = FREE
 
     hall_y0 = wall + room_depth
     main_x1 = wall + rooms_per_side * room_width
@@ -153,9 +171,9 @@ def generate_building(seed: int = 0, *, rooms_per_side: int = 5, room_width: flo
         door_x = (x0 + x1) / 2
         door_box = (door_x - door / 2, y0 - wall - 0.01, door_x + door / 2, y0 + 0.01) if top else \
             (door_x - door / 2, y1 - 0.01, door_x + door / 2, y1 + wall + 0.01)
-        carve(door_box)
+        _carve(grid, door_box)
     for area in areas:
-        carve(area.box)
+        _carve(grid, area.box)
 
     objects: List[PlacedObject] = []
     labels: Dict[str, Tuple[float, float]] = {}
@@ -170,7 +188,53 @@ def generate_building(seed: int = 0, *, rooms_per_side: int = 5, room_width: flo
         labels[label] = (x, y)
         if object_class:
             objects.append(PlacedObject(object_class, x, y, OBJECT_SIZES[object_class], back.name))
-    return Building(grid, areas, objects, labels)
+    building = Building(grid, areas, objects, labels)
+    return _with_loop(building, back_hall_width, wall) if loop else building
+
+
+def _carve(grid: GridMap, box: Box, *, nearest: bool = False) -> None:
+    """Frees the cells of `box` (x0, y0, x1, y1) in `grid`: from the cells holding its corners
+    (the default floor's rule) or, `nearest`, between the cell edges nearest to them."""
+    if nearest:
+        (c0, c1), (r0, r1) = [np.round((np.asarray(v) - o) / grid.resolution).astype(int)
+                              for v, o in (((box[0], box[2]), grid.origin[0]),
+                                           ((box[1], box[3]), grid.origin[1]))]
+    else:
+        (r0, c0), (r1, c1) = [grid.world_to_cell(x, y) for x, y in ((box[0], box[1]),
+                                                                      (box[2], box[3]))]
+    grid.cells[max(r0, 0):r1, max(c0, 0):c1] = FREE
+
+
+def _with_loop(building: Building, width: float, wall: float, cell: float = 0.5) -> Building:
+    """`building` on a map grown west and north, with a west corridor from the main hall's west
+    end up to a north corridor over the whole floor that meets the back hall (extended up to
+    it), both `width` wide. The west growth is a whole number of `cell`s (the people model's
+    cells), so those cells of the old floor stay where they were. The openings in the old
+    floor's walls are carved by its own rule, so they line up with its halls' free cells."""
+    old = building.grid
+    res = old.resolution
+    halls = {area.name: area for area in building.halls}
+    main, back = halls["main_hall"], halls["back_hall"]
+    x0, top = round(old.origin[0] - width, 6), round(old.origin[1] + old.height * res, 6)
+    back_up = replace(back, box=_rounded(back.box[:3] + (top,)))
+    opened = GridMap(old.cells.copy(), res, old.origin)
+    for box in ((old.origin[0] - 0.01, main.box[1], main.box[0] + 0.01, main.box[3]),
+                (back.box[0], back.box[3] - 0.01, back.box[2], top + 0.01)):
+        _carve(opened, box)
+    west = int(round(math.ceil((width + wall) / cell - 1e-9) * cell / res))
+    north = int(round((width + wall) / res))
+    cells = np.full((old.height + north, old.width + west), OCCUPIED, dtype=np.int8)
+    cells[:old.height, west:] = opened.cells
+    origin = (round(old.origin[0] - west * res, 6), old.origin[1], 0.0)
+    grid = GridMap(cells, res, origin, dict(old.meta, source=f"{old.meta['source']} loop"))
+    corridors = [Area("west_corridor", "hall", "west_corridor",
+                      _rounded((x0, main.box[1], old.origin[0], top)), back.busy),
+                 Area("north_corridor", "hall", "north_corridor",
+                      _rounded((x0, top, back.box[2], top + width)), back.busy)]
+    for area in corridors:
+        _carve(grid, area.box, nearest=True)
+    areas = [back_up if area is back else area for area in building.areas]
+    return Building(grid, areas + corridors, list(building.objects), dict(building.labels))
 
 
 def _rounded(box: Box) -> Box:
@@ -193,14 +257,21 @@ def _place_objects(area: Area, contents: Sequence[Tuple[str, int]],
                          OBJECT_SIZES[name], area.name) for name, i in zip(wanted, order)]
 
 
-def building_or_map(map_yaml: str, seed: int) -> Tuple[GridMap, Optional[Building]]:
+LAYOUTS = ("hall", "loop")
+
+
+def building_or_map(map_yaml: str, seed: int,
+                    layout: str = "hall") -> Tuple[GridMap, Optional[Building]]:
     """The map a simulator node runs on: a map_server file (`map_yaml`, ~ expanded) or, when
-    `map_yaml` is empty, the generated building of `seed`.
+    `map_yaml` is empty, the generated building of `seed` with `layout` "hall" (the default
+    floor) or "loop" (`generate_building(seed, loop=True)`).
 
     Returns (grid, building); `building` is None for a map file (no known areas). A map file
-    that cannot be read raises robot_common's MapError.
+    that cannot be read raises robot_common's MapError; an unknown layout ValueError.
     """
+    if layout not in LAYOUTS:
+        raise ValueError(f"layout must be one of {LAYOUTS}, got {layout!r}")
     if map_yaml:
         return load_map(os.path.expanduser(map_yaml)), None
-    building = generate_building(seed)
+    building = generate_building(seed, loop=layout == "loop")
     return building.grid, building

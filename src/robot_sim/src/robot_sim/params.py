@@ -14,6 +14,7 @@ import yaml
 
 from robot_common.errors import ConfigError
 from robot_common.params import NodeConfig, param
+from robot_sim.building import LAYOUTS
 
 __all__ = ["MapPublisherParams", "SensorSimParams", "UnicycleSimParams", "BuildingSimParams",
            "PeopleSimParams", "ObjectDetectionSimParams", "load_config_file"]
@@ -21,6 +22,12 @@ __all__ = ["MapPublisherParams", "SensorSimParams", "UnicycleSimParams", "Buildi
 ConfigT = TypeVar("ConfigT", bound=NodeConfig)
 
 _MAP_YAML_DOC = "map_server .yaml file; empty: the generated building floor of `seed`"
+_LAYOUT_DOC = ("the generated floor (with an empty map_yaml): hall (one main hall and a back hall) "
+               "or loop (plus west and north corridors: a second, quiet way round)")
+
+
+def _layout():
+    return param("hall", _LAYOUT_DOC, choices=LAYOUTS)
 
 
 @dataclass
@@ -29,6 +36,7 @@ class MapPublisherParams(NodeConfig):
 
     map_yaml: str = param("", _MAP_YAML_DOC)
     seed: int = param(0, "seed of the generated building")
+    layout: str = _layout()
     frame_id: str = param("map", "frame of the map")
     labels_path: str = param("", "if set, the generated building's labels are written there "
                                  "(map_labelling JSON, for the region recommender)")
@@ -40,6 +48,7 @@ class SensorSimParams(NodeConfig):
 
     map_yaml: str = param("", _MAP_YAML_DOC)
     seed: int = param(0, "seed of the generated building")
+    layout: str = _layout()
     speed: float = param(0.5, "patrol speed (m/s)")
     waypoints: list = param([[0.0, 0.0], [1.0, 0.0]],
                             "patrol [x, y] waypoints on a map file (the generated building: its hall)")
@@ -101,6 +110,7 @@ class BuildingSimParams(NodeConfig):
     map_yaml: str = param("", _MAP_YAML_DOC)
     seed: int = param(0, "seed of the generated building, the robot's start on a map file and "
                          "the people's routes")
+    layout: str = _layout()
     start: list = param([], "[x, y, yaw] of the robot in the map frame; []: the generated "
                             "building's main hall 1.5 m from its west end facing east (a map "
                             "file: a spot 0.7 m clear of walls drawn from `seed`)")
@@ -149,6 +159,7 @@ class PeopleSimParams(NodeConfig):
                               "(or the `map` topic, see use_map_topic)")
     use_map_topic: bool = param(False, "true: derive the halls from the first map on the `map` topic")
     seed: int = param(0, "seed of the generated building")
+    layout: str = _layout()
     sim_seed: int = param(1, "seed of the places, times and counts")
     cell_size: float = param(0.5, "cell size (m)")
     robots: int = param(3, "number of simulated robots", minimum=1)

@@ -39,7 +39,8 @@ class BuildingSim:
     """A unicycle robot on a building floor among walking people, driven by cmd_vel.
 
     Parameters (robot_sim.params.BuildingSimParams, defaults in config/building_sim.yaml):
-      ~map_yaml (""): a map_server file; empty: the generated building of ~seed (0).
+      ~map_yaml (""): a map_server file; empty: the generated building of ~seed (0), ~layout
+      ("hall"; "loop": with west and north corridors round the main hall).
       ~start ([]): [x, y, yaw] in the map frame; []: the generated building's main hall 1.5 m
       from its west end facing east (a map file: a free spot drawn from ~seed).
       ~people (4): people walking rounds through the halls, from ~seed (they wait for the robot
@@ -71,7 +72,7 @@ class BuildingSim:
 
     def __init__(self, config: BuildingSimParams):
         self.config = config
-        grid, building = building_or_map(config.map_yaml, config.seed)
+        grid, building = building_or_map(config.map_yaml, config.seed, config.layout)
         start = config.start or default_start(grid, building, config.seed)
         self.sensors = SensorModel(grid, scan_beams=config.scan_beams, scan_range=config.scan_range)
         count, crowd = config.people, None

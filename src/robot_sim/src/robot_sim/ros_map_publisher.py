@@ -16,7 +16,8 @@ class MapPublisher:
     """Publishes a map file or a generated building floor, latched, once.
 
     Parameters (robot_sim.params.MapPublisherParams): ~map_yaml (""; empty: the generated
-    building of ~seed), ~seed (0), ~frame_id ("map"), ~labels_path ("": if set, the generated
+    building of ~seed), ~seed (0), ~layout ("hall"; "loop": the floor with west and north
+    corridors), ~frame_id ("map"), ~labels_path ("": if set, the generated
     building's labels are written there in the map_labelling JSON format).
     Topics (out, latched): map (nav_msgs/OccupancyGrid), map_metadata (nav_msgs/MapMetaData).
 
@@ -26,7 +27,8 @@ class MapPublisher:
 
     def __init__(self, config: MapPublisherParams):
         self.config = config
-        self.grid, self.building = building_or_map(config.map_yaml, config.seed)
+        self.grid, self.building = building_or_map(config.map_yaml, config.seed,
+                                                     config.layout)
 
     def setup(self) -> None:
         labels_path = self.config.labels_path

@@ -11,7 +11,7 @@ from robot_common.maps import GridMap, load_map
 from robot_common.msg import PeopleCount
 from robot_common.ros_maps import msg_to_grid
 from robot_common.ros_node import read_config
-from robot_sim.building import generate_building
+from robot_sim.building import building_or_map
 from robot_sim.params import PeopleSimParams
 from robot_sim.people import PeopleSimulator, View
 
@@ -34,8 +34,8 @@ class PeopleSimNode:
     """Simulated robots counting people in the halls, at random places, in simulated time.
 
     Parameters (private; robot_sim.params.PeopleSimParams, defaults in config/people_sim.yaml):
-    map_yaml ("": the generated building of `seed`, as robot_sim's map_publisher makes it; else
-    halls derived from the map),
+    map_yaml ("": the generated building of `seed` and `layout` ("hall" or "loop"), as
+    robot_sim's map_publisher makes it; else halls derived from the map),
     use_map_topic (false; true: halls derived from the first `map` message, nav_msgs/OccupancyGrid),
     seed (0), sim_seed (1: places, times, counts), cell_size (0.5 m), robots (3), rate
     (5 views per wall-clock second, all robots), time_scale (60 simulated seconds per second),
@@ -57,8 +57,8 @@ class PeopleSimNode:
                 grid = load_map(os.path.expanduser(config.map_yaml))
             self.sim = PeopleSimulator.from_map(grid, config.cell_size, **options)
         else:
-            self.sim = PeopleSimulator.from_building(generate_building(config.seed),
-                                                     config.cell_size, **options)
+            _, building = building_or_map("", config.seed, config.layout)
+            self.sim = PeopleSimulator.from_building(building, config.cell_size, **options)
         self.count = 0
 
     def setup(self) -> None:

@@ -32,8 +32,9 @@ class SensorSim:
     """Publishes each sensor from its own thread at its own rate.
 
     Parameters (robot_sim.params.SensorSimParams, defaults in config/sensor_sim.yaml):
-      ~map_yaml (""), ~seed (0): the map (empty map_yaml: the generated building, patrolling its
-      main hall; a map file: patrolling ~waypoints, default [[0, 0], [1, 0]]).
+      ~map_yaml (""), ~seed (0), ~layout ("hall" or "loop"): the map (empty map_yaml: the
+      generated building, patrolling its main hall; a map file: patrolling ~waypoints,
+      default [[0, 0], [1, 0]]).
       ~speed (0.5 m/s): patrol speed.
       ~odom_rate (50), ~tf_rate (50), ~scan_rate (10), ~image_rate (5), ~joint_rate (20):
       publishing rates (Hz); 0 disables a topic.
@@ -59,7 +60,7 @@ class SensorSim:
 
     def __init__(self, config: SensorSimParams):
         self.config = config
-        grid, building = building_or_map(config.map_yaml, config.seed)
+        grid, building = building_or_map(config.map_yaml, config.seed, config.layout)
         self.path = hall_patrol(building, config.speed) if building is not None else \
             PatrolPath(config.waypoints, config.speed)
         self.sensors = SensorModel(grid, scan_beams=config.scan_beams, scan_range=config.scan_range,

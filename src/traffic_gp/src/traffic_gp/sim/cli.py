@@ -4,7 +4,8 @@
   python -m traffic_gp.sim.cli train --counted --views 1500 --out crowd.npz  (a counter's counts)
   python -m traffic_gp.sim.cli report --model crowd.npz --map generated:0 --out plots/
   python -m traffic_gp.sim.cli info crowd.npz
---map takes `generated:SEED` (a generated building) or a map_server .yaml file (halls derived).
+--map takes `generated:SEED` (a generated building), `generated-loop:SEED` (the same floor with
+west and north corridors round its main hall) or a map_server .yaml file (halls derived).
 Part of `traffic_gp.sim`: it needs robot_sim (the people simulator). Errors: one `ERROR: ...`
 line on stderr and exit status 1.
 """
@@ -30,7 +31,8 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="crowd_model", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     train = sub.add_parser("train", help="simulate robots' counts, fit a model, save it")
-    train.add_argument("--map", default="generated:0")
+    train.add_argument("--map", default="generated:0",
+                       help="generated:SEED, generated-loop:SEED or a map_server .yaml file")
     train.add_argument("--cell-size", type=float, default=0.5)
     train.add_argument("--views", type=int, default=20000, help="robot views (observations)")
     train.add_argument("--weeks", type=int, default=2, help="weeks of weekdays they span")

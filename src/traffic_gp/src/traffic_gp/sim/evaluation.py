@@ -5,7 +5,7 @@ is scored with its full predictive distribution, others as Poisson with their po
 """
 from dataclasses import replace
 from pathlib import Path
-from typing import Dict, Optional, Sequence
+from typing import Dict, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy import stats
@@ -14,7 +14,7 @@ import traffic_gp.plots as plots
 import traffic_gp.predictive as predictive
 from robot_common.errors import ConfigError
 from robot_common.maps import FREE, OCCUPIED, GridMap, load_map
-from robot_sim.building import Building, generate_building
+from robot_sim.building import Building, building_or_map
 from robot_sim.people import PeopleSimulator
 from traffic_gp.observations import Observations
 
@@ -36,20 +36,39 @@ def closed_doors(building: Building) -> Building:
     return replace(building, grid=shut)
 
 
+GENERATED_SPECS = {"generated": "hall", "generated-loop": "loop"}
+
+
+def generated_spec(map_spec: str) -> Optional[Tuple[str, int]]:
+    """(layout, seed) of a generated floor's spec `generated:SEED` (the default floor) or
+    `generated-loop:SEED` (with west and north corridors; robot_sim.building), SEED 0 when
+    left out; None for anything else (a map file). ConfigError when SEED is not an integer."""
+    kind, _, seed = map_spec.partition(":")
+    if kind not in GENERATED_SPECS:
+        return None
+    try:
+        return GENERATED_SPECS[kind], int(seed or 0)
+    except ValueError as err:
+        raise ConfigError(f"bad seed {seed!r} in map {map_spec!r} (generated:SEED or "
+                          f"generated-loop:SEED)") from err
+
+
 def simulator_for(map_spec: str, cell_size: float = 0.5, *, doors_closed: bool = False,
                   **options) -> PeopleSimulator:
-    """`generated:SEED` (a generated building; `doors_closed`: `closed_doors` of it) or a
-    map_server .yaml file (halls derived)."""
-    if map_spec.startswith("generated"):
-        _, _, seed = map_spec.partition(":")
-        building: Building = generate_building(int(seed or 0))
+    """`generated:SEED` or `generated-loop:SEED` (a generated building, see `generated_spec`;
+    `doors_closed`: `closed_doors` of it, which also shuts the loop's doorway at the main
+    hall's west end) or a map_server .yaml file (halls derived)."""
+    generated = generated_spec(map_spec)
+    if generated is not None:
+        building = building_or_map("", generated[1], generated[0])[1]
         if doors_closed:
             building = closed_doors(building)
         return PeopleSimulator.from_building(building, cell_size, **options)
     if doors_closed:
         raise ConfigError("doors_closed needs a generated building (its rooms are known)")
     if not Path(map_spec).is_file():
-        raise ConfigError(f"no map file {map_spec} (use a .yaml path or generated:SEED)")
+        raise ConfigError(f"no map file {map_spec} (use a .yaml path, generated:SEED or "
+                          f"generated-loop:SEED)")
     return PeopleSimulator.from_map(load_map(map_spec), cell_size, **options)
 
 
