@@ -40,7 +40,8 @@ class PlannerSettings:
     crowd_gamma: float = 1.913    # m^-2: how fast the speed drops with density (Weidmann)
     min_speed: float = 0.1        # m/s: the crowd speed is never taken slower than this
     meet_radius: float = 1.0      # m: a person this close to the robot's path counts as met
-    person_cost: float = 10.0     # s of travel time worth meeting one person fewer
+    person_cost: float = 30.0     # s of travel time worth meeting one person fewer (chosen on
+    #                               the generated building: bench/errand_nav/errands.py)
     look_ahead: float = 900.0     # s: forecasts beyond start + look_ahead are held
 
     def __post_init__(self):
