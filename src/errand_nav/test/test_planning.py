@@ -8,7 +8,7 @@ import pytest
 from errand_nav.forecast import DensityForecast
 from errand_nav.planning import CrowdPlanner, PlannerSettings
 from robot_common.errors import MapError
-from robot_common.gridplan import NoPathError, plan_path
+from robot_common.gridplan import CellCosts, NoPathError, cheapest_cells, plan_path
 from robot_common.maps import FREE, OCCUPIED, GridMap
 
 RES = 0.25
@@ -152,3 +152,37 @@ def test_people_met_are_counted_over_the_band_whatever_side_of_a_corridor_the_pa
     for y in (8.3, 8.75, 9.2):               # bottom row 33 (rows 29-37), 35 (31-39), 36 (32-40)
         path = planner.evaluate([(5.0, y), (15.0, y)], 0.0, forecast)
         assert path.people_met == pytest.approx(10.0 * 2.0 * 6.0 / 9.0)
+
+
+def _interpolated(layers, stamps, clock, row, col):
+    """A cell's value at `clock`: linear between stamps, held beyond (the slow way)."""
+    return float(np.interp(clock, stamps, layers[:, row, col]))
+
+
+def test_the_time_dependent_search_matches_a_label_correcting_reference_when_cost_is_time():
+    # cost = pace (the clock itself), changing slower than the clock (FIFO): the earliest
+    # arrival is what repeating every move's relaxation until nothing changes gives
+    rng = np.random.default_rng(3)
+    stamps = [0.0, 5.0, 10.0]
+    pace = rng.uniform(1.0, 3.0, (3, 6, 7))
+    pace[:, 1:5, 3] = np.inf                                  # a wall with gaps at rows 0, 5
+    costs = CellCosts(pace, np.where(np.isfinite(pace), pace, 0.0), stamps)
+    cells, clocks = cheapest_cells(costs, (2, 0), (3, 6), 0.0)
+    arrival = np.full((6, 7), np.inf)
+    arrival[2, 0] = 0.0
+    changed = True
+    while changed:
+        changed = False
+        for (row, col), now in np.ndenumerate(arrival):
+            if not np.isfinite(now):
+                continue
+            for d_row, d_col in [(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1) if a or b]:
+                r, c = row + d_row, col + d_col
+                if not (0 <= r < 6 and 0 <= c < 7 and np.isfinite(pace[0, r, c])):
+                    continue
+                step = math.hypot(d_row, d_col) * 0.5 * (
+                    _interpolated(pace, stamps, now, row, col) + _interpolated(pace, stamps, now, r, c))
+                if now + step < arrival[r, c] - 1e-12:
+                    arrival[r, c], changed = now + step, True
+    assert cells[0] == (2, 0) and cells[-1] == (3, 6)
+    assert clocks[-1] == pytest.approx(arrival[3, 6])
