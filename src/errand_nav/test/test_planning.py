@@ -68,6 +68,8 @@ def test_without_a_crowd_the_plan_is_the_shortest_path_at_the_free_speed():
     assert path.duration == pytest.approx(path.length / 0.6)
     assert path.times[0] == 50.0 and path.times[-1] == pytest.approx(50.0 + path.length / 0.6)
     assert np.all(np.diff(path.times) >= 0)
+    near = CrowdPlanner(grid, SETTINGS).plan(START, (1.55, 8.8), 0.0, DensityForecast.quiet(grid))
+    assert near.points.tolist() == [list(START), [1.55, 8.8]]          # both in one cell
 
 
 def test_a_corridor_crowded_only_by_the_time_the_robot_gets_there_is_avoided():

@@ -92,7 +92,9 @@ class SearchGrid:
         return int(row), int(col)
 
     def polyline(self, cells: Sequence[Tuple[int, int]], start, goal) -> np.ndarray:
-        """Cell centres (N, 2) of `cells`, the first and last replaced by `start` and `goal`."""
+        """Cell centres (N, 2) of `cells`, the first and last replaced by `start` and `goal`
+        (two points when both lie in one cell)."""
+        cells = list(cells) * 2 if len(cells) == 1 else cells
         rows, cols = np.array([c[0] for c in cells]), np.array([c[1] for c in cells])
         points = np.column_stack(self.coarse.cell_to_world(rows, cols))
         points[0], points[-1] = start[:2], goal[:2]
