@@ -16,7 +16,7 @@ fixed without F's drives):
     (calibrate_pace), the barrier margin to the person's room (room_margin) and checked
     with the controller in the loop on every demonstrated
     scene (hallway_acceptance: refused only for failing where the person succeeded; a refused
-    reward scores 0 %);
+    reward scores 0 %) - lfd_controller.sim.teach_hallway's recipe (its `teach`);
   * on test-floor scenes the person drives, the learned controller drives with the node's 0.1 s
     cycle budget, and beside it behaviour cloning (the same demonstrations, size and L2 chosen
     on training-floor validation scenes), a social-force controller and a sampling (DWA-style)
@@ -34,7 +34,6 @@ import argparse
 import json
 import os
 import sys
-import time
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -42,28 +41,18 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from lfd_controller.baseline import BehaviourCloning  # noqa: E402
-from lfd_controller.hallway import (  # noqa: E402
-    HALLWAY_SAFETY,
-    HallwayController,
-    TaskBuilder,
-    calibrate_pace,
-    fit_hallway_reward,
-    hallway_acceptance,
-    hallway_windows,
-    room_margin,
-)
+from lfd_controller.hallway import HALLWAY_SAFETY, TaskBuilder  # noqa: E402
 from lfd_controller.hallway_baselines import SamplingController, SocialForceController, tune  # noqa: E402
 from lfd_controller.sim import FAMILIES  # noqa: E402
-from lfd_controller.sim.hallway_people import HallwayDriver, drive_figures, hallway_demonstration  # noqa: E402
+from lfd_controller.sim.hallway_people import drive_figures, hallway_demonstration  # noqa: E402
+from lfd_controller.sim.teach_hallway import drive_learner, family_person, scenes, teach  # noqa: E402
 from robot_common.maps import load_map  # noqa: E402
-from robot_common.unicycle import Unicycle  # noqa: E402
 from robot_sim.building import generate_building  # noqa: E402
-from robot_sim.hallway import drive, make_scene  # noqa: E402
+from robot_sim.hallway import drive  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 OUT = ROOT / "artifacts" / "bench" / "lfd_building"
 MAPS = ROOT.parent / "shared" / "data" / "maps"
-LENGTH = (10.0, 30.0)
 BC_GRID = {"hidden": ((64, 64),), "alpha": (1e-4, 1e-2)}
 SF_GRID = {"speed": (0.4, 0.55), "push": (0.5, 1.5), "reach": (0.3, 0.6)}
 DWA_GRID = {"v_max": (0.4, 0.55), "clearance_weight": (0.5, 2.0), "margin": (0.05, 0.15)}
@@ -76,11 +65,6 @@ def floors():
     else:
         tests = [("generated_seed7", generate_building(7, rooms_per_side=7).grid)]
     return train, tests
-
-
-def scenes(grid, name, seeds, people=None):
-    return [make_scene(grid, seed, people=people or 2 + seed % 7, clutter=1, length=LENGTH,
-                       name=f"{name}/{seed}") for seed in seeds]
 
 
 def view_policy(act_on_task, scene):
@@ -99,22 +83,6 @@ def drive_baseline(scene, controller):
 
 def drive_cloning(scene, policy):
     return drive_figures(drive(scene, view_policy(policy.predict, scene)))
-
-
-def drive_learner(scene, reward, budget=0.1, margin=HALLWAY_SAFETY["barrier_margin"]):
-    controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=budget,
-                                   safety=dict(HALLWAY_SAFETY, barrier_margin=margin))
-    cycles = []
-
-    def policy(state, t, seen):
-        started = time.perf_counter()
-        command = controller.act(state, t, seen.angles, seen.ranges, seen.people, seen.velocities)
-        cycles.append(time.perf_counter() - started)
-        return command
-    figures = drive_figures(drive(scene, policy))
-    figures["cycles"] = cycles
-    figures["status"] = controller.status_
-    return figures
 
 
 def success_score(runs):
@@ -136,27 +104,11 @@ def tuned_baselines(train_grid):
 
 
 def family_row(family, train_grid, tests, sf, dwa, validation, demos_wanted):
-    person = HallwayDriver(family, seed=1000 + sorted(FAMILIES).index(family))
-    windows, step_windows, speeds, demo_scenes, person_demo = [], [], [], [], []
-    for scene in scenes(train_grid, "train", range(100, 100 + 3 * demos_wanted)):
-        if len(demo_scenes) >= demos_wanted:
-            break
-        result, tasks = hallway_demonstration(person, scene)
-        if not result.success:
-            continue
-        windows += hallway_windows(result.states, result.actions, tasks)
-        step_windows += hallway_windows(result.states, result.actions, tasks, length=2, stride=1)
-        moving = result.states[:, 3]
-        speeds.append(float(np.median(moving[moving > 0.05])))
-        demo_scenes.append(scene)
-        person_demo.append(drive_figures(result))
-    started = time.process_time()
-    reward, _ = fit_hallway_reward(windows)
-    reward = calibrate_pace(reward, float(np.median(speeds)))
-    margin = room_margin([d["closest"] for d in person_demo])
-    learn_cpu = time.process_time() - started
-    check = [drive_learner(s, reward, budget=None, margin=margin) for s in demo_scenes]
-    verdict = hallway_acceptance(person_demo, check)
+    person = family_person(family)
+    taught = teach(person, scenes(train_grid, "train", range(100, 100 + 3 * demos_wanted)),
+                   demos_wanted)
+    reward, margin, verdict, step_windows = (taught.reward, taught.margin, taught.verdict,
+                                             taught.step_windows)
     cloning, best = None, -np.inf
     for hidden in BC_GRID["hidden"]:
         for alpha in BC_GRID["alpha"]:
@@ -179,8 +131,8 @@ def family_row(family, train_grid, tests, sf, dwa, validation, demos_wanted):
                   + " ".join(f"{k}={row[k]['success']}/{row[k]['collision']}/{row[k]['time']:.0f}"
                              for k in ("person", "learned", "cloning", "social_force", "sampling")),
                   flush=True)
-    return {"family": family, "demos": len(demo_scenes), "windows": len(windows), "margin": margin,
-            "learn_cpu_s": learn_cpu, "acceptance": verdict,
+    return {"family": family, "demos": len(taught.demo_scenes), "windows": len(taught.windows),
+            "margin": margin, "learn_cpu_s": taught.learn_cpu, "acceptance": verdict,
             "weights": dict(zip(reward.features.names, map(float, reward.weights))), "rows": rows}
 
 

@@ -116,11 +116,12 @@ class RewardControllerParams(NodeConfig):
     reward_settings: bool = param(True, "drive with the controller settings saved with the reward "
                                         "(learn_reward --kind person saves horizon, plan_dt, "
                                         "terminal, detour, spread_seeds, discount, "
-                                        "min_horizon, arrival, unstall, collision_margin) instead of "
+                                        "min_horizon, arrival, unstall, collision_margin; "
+                                        "sim.teach_hallway saves barrier_margin) instead of "
                                         "these")
 
     SAVED_SETTINGS = ("horizon", "plan_dt", "terminal", "detour", "spread_seeds", "discount",
-                      "min_horizon", "arrival", "unstall", "collision_margin")
+                      "min_horizon", "arrival", "unstall", "collision_margin", "barrier_margin")
 
     def check(self) -> None:
         if not self.rate > 0:
