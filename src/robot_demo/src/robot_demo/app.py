@@ -24,6 +24,7 @@ from robot_demo.chapters import (
     crowd_map,
     data_api,
     demonstrations,
+    errands,
     fleet,
     object_layers,
     region_search,
@@ -37,7 +38,7 @@ __all__ = ["CHAPTERS", "Demo", "workspace_root", "parse_args", "main"]
 ConfigT = TypeVar("ConfigT", bound=NodeConfig)
 
 CHAPTERS = {module.__name__.rsplit(".", 1)[-1]: module for module in (
-    robot, data_api, object_layers, region_search, crowd_map, demonstrations, fleet)}
+    robot, data_api, object_layers, region_search, crowd_map, demonstrations, fleet, errands)}
 
 
 def workspace_root() -> Path:
