@@ -17,7 +17,9 @@ catkin_lint in tests/test_manifests.py.
 The same build (testing enabled, as a ROS developer's would be) then runs `catkin_make run_tests`:
 each package's pytest suite and its launch-file check (robot_common's `robot_common_add_pytests`,
 roslaunch's `roslaunch_add_file_check`) leave JUnit XML under build/test_results, which
-`catkin_test_results` sums up.
+`catkin_test_results` sums up. The suites run there without their ROS tests (PYTEST_ADDOPTS
+`-m "not ros"`, which pytest reads whoever starts it): those start the workspace's nodes, as in
+the suite's own run of the same tests, and add nothing to what run_tests proves but CPU.
 """
 import os
 import re
@@ -35,6 +37,8 @@ PACKAGES = ("robot_common", "robot_sim")
 # Message generators of other languages than Python are left out of the build (no package of the
 # workspace uses their C++, Lisp, ... files; what is checked here is the Python install space).
 OTHER_MESSAGE_LANGUAGES = "gencpp:geneus:genlisp:gennodejs"
+# The packages' tests that `catkin_make run_tests` runs here (and that the count compares with).
+SELECTION = {"PYTEST_ADDOPTS": "-m 'not ros'"}
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -137,7 +141,7 @@ def _collected_tests(test_dirs) -> Dict[Path, int]:
     """How many tests pytest itself collects in each folder (an independent count; one run)."""
     listed = subprocess.run([_python(), "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider",
                              *map(str, test_dirs)], cwd=ROOT, capture_output=True, text=True,
-                            timeout=600)
+                            timeout=600, env=dict(os.environ, **SELECTION))
     ids = [line for line in listed.stdout.splitlines() if "::" in line]
     return {folder: sum(1 for i in ids if folder in (ROOT / i.split("::")[0]).parents)
             for folder in test_dirs}
@@ -147,7 +151,7 @@ def test_catkin_make_run_tests_runs_each_packages_tests_and_launch_checks(instal
     folder = install_space.parent
     results = folder / "build" / "test_results"
     env = dict(os.environ, PATH=f"/usr/bin:/bin:{os.environ['PATH']}",
-               ROS_LANG_DISABLE=OTHER_MESSAGE_LANGUAGES)
+               ROS_LANG_DISABLE=OTHER_MESSAGE_LANGUAGES, **SELECTION)
     run = subprocess.run(["catkin_make", "--directory", str(folder), "--source", str(ROOT / "src"),
                           "--build", str(folder / "build"), "run_tests"],
                          cwd=folder, env=env, capture_output=True, text=True, timeout=1800)

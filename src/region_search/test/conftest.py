@@ -1,5 +1,6 @@
 """Markers of the region_search tests: `@pytest.mark.wordnet` skips a test when Debian's
-wordnet-base is not installed."""
+wordnet-base is not installed. The shared test module (region_search_never_hurt) is importable."""
+import sys
 from pathlib import Path
 
 import pytest
@@ -7,6 +8,8 @@ import pytest
 from region_search.corpora import DEFAULT_WORDNET_DIR
 
 WORDNET = Path(DEFAULT_WORDNET_DIR)
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
 def pytest_configure(config):

@@ -13,15 +13,24 @@ then the embedding server, which must train word2vec (minutes; the test waits on
 embedding server (now a warm start from the cache) that the recommender rides through.
 The expected places are the labels the phrases name or mean (chosen by hand from the label
 names), not answers recorded from the code.
+
+The model trained here then serves the word2vec half of the descriptions-never-hurt check
+(test_descriptions_never_hurt.py holds the sentence half and says what is checked): the suite
+trains it once. Run alone, that test trains the same model itself.
 """
+import functools
 import re
 import shutil
 import threading
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from region_search_never_hurt import OnceFeatures, check_never_hurt, evaluation_sets
 
+from region_search.corpora import WordNet
+from region_search.ranking import PlaceRecommender, WordFeatures, load_ranking_weights
 from region_search.srv import Embed, RecommendRegion
+from region_search.training import Word2VecParams, load_embeddings
 from ros_harness import wait_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.wordnet]
@@ -67,9 +76,16 @@ def answers(recommend):
     return results
 
 
+@pytest.fixture(scope="module")
+def trained_models(tmp_path_factory):
+    """A word2vec cache folder: the model the first test's server trained is copied here once
+    that test has passed; the later tests load it (or train it, when run alone)."""
+    return tmp_path_factory.mktemp("trained_word2vec")
+
+
 @pytest.mark.timeout(TRAINING_TIMEOUT + 1200)  # the suite's 600 s cannot hold a training
 def test_word2vec_from_an_empty_cache_in_any_start_order_then_a_server_restart(
-        roslaunch, rospy_node, tmp_path, shared_data_dir):
+        roslaunch, rospy_node, tmp_path, shared_data_dir, trained_models):
     cache = tmp_path / "empty_cache"
     cache.mkdir()
     labels = tmp_path / "labels.json"
@@ -141,3 +157,19 @@ def test_word2vec_from_an_empty_cache_in_any_start_order_then_a_server_restart(
     assert list(again.labels) == first["room 321"]
     assert answers(recommend) == first
     assert list(cache.glob("word2vec-*/meta.json")) == trained  # not trained a second time
+    shutil.copytree(trained[0].parent, trained_models / trained[0].parent.name)
+
+
+@pytest.mark.timeout(TRAINING_TIMEOUT)  # a training when run alone
+def test_descriptions_never_hurt_the_word2vec_backend(trained_models, shared_data_dir):
+    # The server's model: its settings with source "wordnet" (what "auto" is without a Brown
+    # corpus) and EPOCHS; the cache key holds the corpus files, the parameters and gensim's version.
+    model, _ = load_embeddings("wordnet", params=Word2VecParams(epochs=EPOCHS),
+                               cache_dir=trained_models)
+    # A word's vector depends on the word alone: each word's looked up once (the fallbacks of
+    # words outside the vocabulary, such as the spelling search, are the costly part).
+    model.word_vector = functools.lru_cache(maxsize=None)(model.word_vector)
+    wordnet = WordNet()
+    recommender = PlaceRecommender(OnceFeatures(WordFeatures(model.embed_words, wordnet)),
+                                   load_ranking_weights("word2vec"))
+    check_never_hurt(recommender, evaluation_sets(shared_data_dir / "maps"))
