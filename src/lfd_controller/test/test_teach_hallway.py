@@ -18,7 +18,9 @@ def test_one_short_drive_gives_a_reward_file_reward_controller_drives_with(tmp_p
                    "--length", "4", "6", "--out", str(out), "--accept-anyway"])
     captured = capsys.readouterr()
     assert status == 0, captured.err
-    assert "demonstration 1/1" in captured.err and "acceptance 1/1" in captured.err
+    # progress: the first of at most 3 scenes gave the one demonstration, then the check
+    assert "scene 1/3" in captured.err and "demonstration 1/1" in captured.err
+    assert "acceptance 1/1" in captured.err
     reward = load_reward(str(out))            # what ros_controller.start does with the file
     assert isinstance(reward.features, HallwayFeatures)      # -> the path mode
     saved = controller_settings(str(out))

@@ -132,9 +132,10 @@ def demonstrate(person: HallwayDriver, candidates: Sequence[HallwayScene], wante
         taught.tried += 1
         result, tasks = hallway_demonstration(person, scene)
         figures = drive_figures(result)
-        progress(f"demonstration {len(taught.demo_scenes) + 1}/{wanted}: {scene.name} "
-                 f"({len(scene.people)} people, {scene.length:.0f} m): "
-                 + ("reached the goal" if result.success else "failed, not used"))
+        progress(f"scene {taught.tried}/{len(candidates)} {scene.name} ({len(scene.people)} "
+                 f"people, {scene.length:.0f} m): " + (
+                     f"demonstration {len(taught.demo_scenes) + 1}/{wanted}" if result.success
+                     else "the person failed, not used"))
         if not result.success:
             continue
         taught.windows += hallway_windows(result.states, result.actions, tasks)
