@@ -243,7 +243,8 @@ def run(args: argparse.Namespace, progress: Callable[[str], None]) -> str:
     accepted = taught.verdict["accepted"]
     if not accepted and not args.accept_anyway:
         raise LfdError("the learned reward was NOT saved: its controller fails where the person "
-                       "succeeded (" + "; ".join(taught.verdict["failures"]) + ")")
+                       "succeeded (" + "; ".join(taught.verdict["failures"]) + "); "
+                       "--accept-anyway saves it regardless")
     path = save_reward(taught.reward, args.out,
                        **reward_info(taught, args, accepted_anyway=not accepted))
     state = "accepted" if accepted else "REFUSED, saved with --accept-anyway"
