@@ -32,6 +32,12 @@ SPACE = {"coffee": [1, 0, 0, 0, 0], "cafe": [0.9, 0.1, 0, 0, 0], "print": [0, 1,
 LABELS = ["printer_room", "cafe", "elevator", "faculty_offices", "towne_321", "towne_313"]
 
 
+@pytest.fixture(scope="module")
+def wordnet():
+    """One WordNet for the module (its index is read once; it only reads the files)."""
+    return WordNet()
+
+
 @pytest.fixture
 def embed():
     kv = KeyedVectors(vector_size=5)
@@ -141,8 +147,8 @@ def test_duplicate_labels_at_several_places_are_all_returned(embed):
 
 
 @pytest.mark.wordnet
-def test_wordnet_expansion_adds_synonyms_related_words_and_definitions():
-    expander = LabelExpander(WordNet())
+def test_wordnet_expansion_adds_synonyms_related_words_and_definitions(wordnet):
+    expander = LabelExpander(wordnet)
     fountain = expander.expand("water_fountain")
     assert fountain["water"] == (1.0, "name")
     assert fountain["bubbler"][1] == "synonym 'bubbler' of water_fountain"
@@ -154,16 +160,16 @@ def test_wordnet_expansion_adds_synonyms_related_words_and_definitions():
 
 
 @pytest.mark.wordnet
-def test_wordnet_synonyms_find_labels_the_vectors_alone_miss(embed):
+def test_wordnet_synonyms_find_labels_the_vectors_alone_miss(embed, wordnet):
     plain = WordMatcher(embed)
-    expanded = WordMatcher(embed, wordnet=WordNet())
+    expanded = WordMatcher(embed, wordnet=wordnet)
     for recommender in (plain, expanded):
         recommender.set_regions(regions(["elevator", "lounge", "bio_lab"]))
     # "couch" has no vector; WordNet lists it as a synonym of lounge ("sofa, couch, lounge").
     assert expanded.recommend("couch").results[0].region.name == "lounge"
     assert plain.recommend("couch").results[0].score == 0.0
     # Without vectors at all, equal words (after expansion) still match.
-    lexical = WordMatcher(None, wordnet=WordNet())
+    lexical = WordMatcher(None, wordnet=wordnet)
     lexical.set_regions(regions(["elevator", "lounge", "bio_lab"]))
     assert lexical.recommend("laboratory").results[0].region.name == "bio_lab"
 
@@ -191,11 +197,11 @@ def test_hubness_correction_lowers_labels_that_match_everything(embed):
 
 
 @pytest.mark.wordnet
-def test_a_share_of_the_word_score_is_the_label_name_alone(embed):
+def test_a_share_of_the_word_score_is_the_label_name_alone(embed, wordnet):
     labels = regions(["printer_room", "cafe", "elevator", "water_fountain"])
-    expanded = WordMatcher(embed, wordnet=WordNet(), name_text_weight=0.0)
+    expanded = WordMatcher(embed, wordnet=wordnet, name_text_weight=0.0)
     names = WordMatcher(embed)
-    shared = WordMatcher(embed, wordnet=WordNet(), name_text_weight=0.25)
+    shared = WordMatcher(embed, wordnet=wordnet, name_text_weight=0.25)
     for recommender in (expanded, names, shared):
         recommender.set_regions(labels)
 
