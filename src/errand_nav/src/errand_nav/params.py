@@ -53,6 +53,8 @@ class ErrandServerParams(NodeConfig):
                                    minimum=0.0)
     snap_radius: float = param(0.6, "m: a start or goal where the robot does not fit is taken at "
                                     "the nearest spot within this where it does", minimum=0.0)
+    tf_timeout: float = param(5.0, "s a new goal waits for the robot's pose on tf before it is "
+                                   "aborted", minimum=0.0)
     check_rate: float = param(5.0, "looks at the errand per second (feedback at the same rate)",
                               minimum=0.1)
     goal_tolerance: float = param(_RULES.goal_tolerance, "m from the goal counts as reached",

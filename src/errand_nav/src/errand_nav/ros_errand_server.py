@@ -108,10 +108,10 @@ class ErrandServer:
         self.client.send_goal(MoveBaseGoal(target_pose=pose))
 
     # -- geometry ----------------------------------------------------------------------------
-    def robot_pose(self) -> Optional[Tuple[float, float, float]]:
+    def robot_pose(self, wait: float = 0.5) -> Optional[Tuple[float, float, float]]:
         try:
             t = self.tf_buffer.lookup_transform(self.config.map_frame, self.config.base_frame,
-                                                rospy.Time(0), rospy.Duration(0.5))
+                                                rospy.Time(0), rospy.Duration(wait))
         except (tf2_ros.LookupException, tf2_ros.ConnectivityException,
                 tf2_ros.ExtrapolationException):
             return None
@@ -300,10 +300,11 @@ class ErrandServer:
         self.report()
 
     def execute(self, goal: MoveBaseGoal) -> None:
-        pose = self.robot_pose()
+        pose = self.robot_pose(wait=self.config.tf_timeout)
         if pose is None:
             return self.finish("aborted", f"no robot pose: no tf from {self.config.map_frame} "
-                                          f"to {self.config.base_frame}")
+                                          f"to {self.config.base_frame} within "
+                                          f"{self.config.tf_timeout:g} s")
         now = rospy.Time.now().to_sec()
         try:
             target = self.in_map(goal.target_pose)
