@@ -7,7 +7,7 @@ from robot_sim.params import ObjectDetectionSimParams, PeopleSimParams
 
 def test_the_chapters_run_in_the_documented_order_and_each_has_a_title():
     assert list(CHAPTERS) == ["robot", "data_api", "object_layers", "region_search", "crowd_map",
-                              "demonstrations", "fleet"]
+                              "demonstrations", "fleet", "errands"]
     assert all(module.TITLE and callable(module.run) for module in CHAPTERS.values())
 
 
@@ -19,7 +19,8 @@ def test_options(tmp_path):
 
 
 def test_composed_launch_files_are_in_the_workspace_launch_folder():
-    for name in ("crowd_sim.launch", "object_layers_sim.launch", "demo.launch", "demo.rviz"):
+    for name in ("crowd_sim.launch", "object_layers_sim.launch", "demo.launch", "demo.rviz",
+                 "errands_sim.launch"):
         assert (workspace_root() / "launch" / name).is_file()
     assert Demo.workspace_launch("crowd_sim.launch").endswith("launch/crowd_sim.launch")
 
