@@ -224,3 +224,55 @@ def test_blob_documents_are_stored_once_without_conflicts(couchdb_url):
     for record in records:
         doc = http_get_json(f"{couchdb_url}/{record.id}?conflicts=true&revs_info=true")
         assert "_conflicts" not in doc and [i["rev"] for i in doc["_revs_info"]] == [doc["_rev"]]
+
+
+def test_images_written_without_a_lookup_go_binary_and_are_stored_once_however_often_sent(couchdb_url):
+    """The recorder's writes (`look_up=False`): one multipart PUT per image with its bytes as they
+    are, the revision given. Sent again: no second revision, no conflict, no new change in the
+    feed; deleted meanwhile: stays deleted. Readers get the same bytes."""
+    import requests
+
+    big = image(width=400, height=300)  # 360,000 bytes of pixels: above the blob threshold
+    raw = serialized(big)
+    records = [make_record("/camera/rgb/image_raw", big.__class__, raw, receive=split_time(40 + i))
+               for i in range(3)]
+    with open_store(couchdb_url) as store:
+        store.put_topic(TopicInfo.of_class("/camera/rgb/image_raw", big.__class__))
+        [(_, _, weight)] = store.prepare_records(records[:1]).items
+        assert len(raw) < weight < len(raw) + 2000  # base64 would be 480,000 bytes and more
+        assert store.insert_records(records, look_up=False) == 3
+        doc = http_get_json(f"{couchdb_url}/{records[2].id}")
+        requests.delete(f"{couchdb_url}/{records[2].id}", params={"rev": doc["_rev"]},
+                        timeout=30).raise_for_status()
+        since = http_get_json(f"{couchdb_url}/_changes")["last_seq"]
+        assert store.insert_records(records, look_up=False) == 3  # sent again: counted, not stored
+        changes = requests.get(f"{couchdb_url}/_changes", params={"since": since}, timeout=30).json()
+        assert changes["results"] == []
+        assert [m.raw for m in store.find_messages(topic="/camera/rgb/image_raw")] == [raw, raw]
+    for record in records[:2]:
+        doc = http_get_json(f"{couchdb_url}/{record.id}?conflicts=true&revs_info=true")
+        assert "_conflicts" not in doc and [i["rev"] for i in doc["_revs_info"]] == [doc["_rev"]]
+        assert doc["_attachments"]["raw"]["length"] == len(raw) and "raw" not in doc
+    assert requests.get(f"{couchdb_url}/{records[2].id}", timeout=30).status_code == 404
+
+
+def test_while_multipart_writes_are_off_images_go_base64_with_the_same_revision(couchdb_url):
+    """The fallback after a multipart write got no answer (a cluster with a node down): the same
+    documents through `_bulk_docs`, so a message sent both ways is still stored once."""
+    from ros_mongo.storage.couch import message_rev
+
+    big = image(width=400, height=300)
+    raw = serialized(big)
+    records = [make_record("/camera/rgb/image_raw", big.__class__, raw, receive=split_time(50 + i))
+               for i in range(2)]
+    with open_store(couchdb_url) as store:
+        store.put_topic(TopicInfo.of_class("/camera/rgb/image_raw", big.__class__))
+        assert store.insert_records(records[:1], look_up=False) == 1  # multipart
+        store._multipart_off_until = float("inf")
+        [(_, _, weight)] = store.prepare_records(records[:1]).items
+        assert weight > len(raw) * 4 / 3  # base64 inside the JSON
+        assert store.insert_records(records, look_up=False) == 2
+        assert [m.raw for m in store.find_messages(topic="/camera/rgb/image_raw")] == [raw, raw]
+    for record in records:
+        doc = http_get_json(f"{couchdb_url}/{record.id}?conflicts=true&revs_info=true")
+        assert [i["rev"] for i in doc["_revs_info"]] == [message_rev(record.id)] and "_conflicts" not in doc

@@ -46,13 +46,14 @@ class StoreWriter:
             if key in self.topics:  # each topic's definition before its messages
                 self.store.put_topic(self.topics[key])
         try:
+            # no lookup before writing (the counts below are ours): each is stored once anyway
             if self.bandwidth is None:
-                self.store.insert_records(records)
+                self.store.insert_records(records, look_up=False)
             else:  # the cap takes the bytes of the encoded documents
                 prepared = self.store.prepare_records(records)
                 self.bandwidth.take(sum(weight for _, _, weight in prepared.items), live=live,
                                     deadline=deadline)
-                self.store.insert_prepared(prepared)
+                self.store.insert_prepared(prepared, look_up=False)
         except DocumentsRejected as err:
             refused = [r for r in records if r.id in err.rejected_ids]
             if len(refused) != err.rejected:  # the server did not name them all: one at a time
@@ -66,7 +67,7 @@ class StoreWriter:
 
     def _insert_alone(self, record: MessageRecord) -> bool:
         try:
-            self.store.insert_records([record])
+            self.store.insert_records([record], look_up=False)
             return True
         except DocumentsRejected:
             return False

@@ -105,15 +105,20 @@ class MessageStore(abc.ABC):
         self.insert_records([record])
         return record.id
 
-    def insert_records(self, records: Sequence[MessageRecord]) -> int:
+    def insert_records(self, records: Sequence[MessageRecord], *, look_up: bool = True) -> int:
         """Store records in batches; ids already stored are skipped (so retries store each once).
 
         Returns the number of records newly stored. Their topic infos must be put first.
+        `look_up` False: documents with attachments are written without looking up first which
+        are stored already (a CouchDB request saved per batch: the recorder's writes). Each is
+        still stored once (a write of a stored one changes nothing), but the count then includes
+        them, and a document stored by a release before 2026-11-24 (a revision the server made)
+        gets the same content as a second revision.
         """
         if not records:
             return 0
         self._ensure()
-        return self.insert_prepared(self.prepare_records(records))
+        return self.insert_prepared(self.prepare_records(records), look_up=look_up)
 
     def prepare_records(self, records: Sequence[MessageRecord]) -> "PreparedRecords":
         """The records encoded as this backend writes them, without any I/O (so a caller can
@@ -131,12 +136,12 @@ class MessageStore(abc.ABC):
             prepared.items.append((item, record.id, weight))
         return prepared
 
-    def insert_prepared(self, prepared: "PreparedRecords") -> int:
+    def insert_prepared(self, prepared: "PreparedRecords", *, look_up: bool = True) -> int:
         """`insert_records` for records `prepare_records` encoded (same contract)."""
         if not prepared.records:
             return 0
         self._ensure()
-        return self._insert(prepared)
+        return self._insert(prepared, look_up)
 
     def put_topic(self, info: TopicInfo) -> None:
         """Keep a topic's definition and latching (once per topic, type and md5sum)."""
@@ -214,7 +219,7 @@ class MessageStore(abc.ABC):
         an admin URL."""
         return True
 
-    def _insert(self, prepared: "PreparedRecords") -> int:
+    def _insert(self, prepared: "PreparedRecords", look_up: bool = True) -> int:
         """Write prepared records in batches of at most `batch_docs` documents and about `batch_bytes`.
 
         A batch refused as a whole because of one document (BatchTooLarge) is split until that
@@ -224,23 +229,23 @@ class MessageStore(abc.ABC):
         stored, errors, batch, size = 0, list(prepared.errors), [], 0
         for item, record_id, weight in prepared.items:
             if batch and (len(batch) >= self.batch_docs or size + weight > self.batch_bytes):
-                stored += self._write_split(batch, errors)
+                stored += self._write_split(batch, errors, look_up)
                 batch, size = [], 0
             batch.append((item, record_id))
             size += weight
         if batch:
-            stored += self._write_split(batch, errors)
+            stored += self._write_split(batch, errors, look_up)
         if errors:
             ids = frozenset(e.split(":", 1)[0] for e in errors)
             raise DocumentsRejected(f"{self.backend_title} rejected {len(errors)} of {prepared.records} "
                                     f"documents, first: {errors[0]}", len(errors), ids)
         return stored
 
-    def _write_split(self, batch: List[Tuple[object, str]], errors: list) -> int:
+    def _write_split(self, batch: List[Tuple[object, str]], errors: list, look_up: bool = True) -> int:
         """`_write_batch`, splitting a batch refused as a whole around the document it names
         (or in halves) until that document is alone; a lone refused document goes to `errors`."""
         try:
-            return self._write_batch([item for item, _ in batch], errors)
+            return self._write_batch([item for item, _ in batch], errors, look_up=look_up)
         except BatchTooLarge as err:
             if len(batch) == 1:
                 errors.append(f"{batch[0][1]}: {err}")
@@ -251,7 +256,7 @@ class MessageStore(abc.ABC):
                 parts = [batch[:at], batch[at:at + 1], batch[at + 1:]]
             else:
                 parts = [batch[:len(batch) // 2], batch[len(batch) // 2:]]
-            return sum(self._write_split(part, errors) for part in parts if part)
+            return sum(self._write_split(part, errors, look_up) for part in parts if part)
 
     @abc.abstractmethod
     def _batch_item(self, record: MessageRecord) -> Tuple[object, int]:
@@ -259,10 +264,11 @@ class MessageStore(abc.ABC):
         only, no I/O: `_write_batch` does the writing)."""
 
     @abc.abstractmethod
-    def _write_batch(self, batch: list, errors: list) -> int:
+    def _write_batch(self, batch: list, errors: list, *, look_up: bool = True) -> int:
         """Write one batch; append "<id>: <reason>" of each document refused on its own merits to
-        `errors`; return how many were newly stored. Raises StoreUnavailable (retry later),
-        StoreRefused (operator must act) or BatchTooLarge (refused as a whole, see `_insert`)."""
+        `errors`; return how many were newly stored (see `insert_records` for `look_up`). Raises
+        StoreUnavailable (retry later), StoreRefused (operator must act) or BatchTooLarge (refused
+        as a whole, see `_insert`)."""
 
     @abc.abstractmethod
     def _put_topic_doc(self, info: TopicInfo) -> None:

@@ -8,13 +8,22 @@ one document per topic and type (`kind: "topic"`, id `topic-<hash>`). Mango inde
 (topic, receive_time) and (receive_time); reads page through `_find` sorted by receive time.
 
 Writes: documents with inline bytes go in one `_bulk_docs` per batch (the server makes their
-revision; a conflict means an earlier attempt stored it). Documents with an attachment are first
-looked up (`_all_docs` keys) and the missing ones written with `new_edits: false` and the revision
-`message_rev(id)` ("1-" + a hash of the id), as replication writes documents: pouchdb-server then
-does not serialize and hash each body with its base64 attachment to make a revision id (about a
-third of its CPU for 900 KB images), and a retry or a second writer of the same message cannot
-make a conflict. Both kinds read back alike; documents written before (server-made revisions)
-are found by the lookup and left as they are.
+revision; a conflict means an earlier attempt stored it). A document with attachments (a large
+message, a chunk) goes in one `multipart/related` `PUT /db/<id>?new_edits=false`: its JSON, then
+its attachments as raw bytes (no base64: a quarter less on the link, no encoding on the robot),
+with the revision `message_rev(id)` ("1-" + a hash of the id), as CouchDB's replicator writes
+documents. The same id always comes with the same revision, so sending a message again (a retry of
+a write that did land, a spool drained twice, a second writer) is a no-op on the server: no second
+document, no conflict, no new change in the feed, and a document deleted since stays deleted. The
+recorder writes them so, one request each (`insert_records(look_up=False)`); other writers look up
+first which are stored (one `_all_docs` request per batch), for an exact count of those newly
+stored and to leave alone a document an older release stored with a revision the server made (a
+write with another revision would add a second, equal revision). A multipart write that gets no
+answer in time (an Apache CouchDB 3.5 cluster with a node down never answers one, measured)
+turns multipart off for `MULTIPART_PAUSE` (600 s): attachments then go base64 inside
+`_bulk_docs` with `new_edits: false` and the same revision, as before 2026-11-29. Both kinds read
+back alike, and as documents written before (base64 attachments in `_bulk_docs`: the same
+document).
 
 Least privilege: recording needs only a database *member* account (document writes). Creating the
 database and the Mango indexes (design documents) is tried once, when the account may; otherwise
@@ -25,11 +34,12 @@ URLs, credentials, TLS options (`tls_ca_file`, `tls_cert_file`, `tls_key_file`, 
 and the mapping of answers to errors: ros_mongo.storage.couch_client, the one CouchDB client.
 
 Answers (see ros_mongo.errors): connection errors, timeouts, a truncated or non-JSON body, 429,
-5xx (500 `timeout` included) -> StoreUnavailable (a `_bulk_docs` answer may take `timeout` plus
+5xx (500 `timeout` included) -> StoreUnavailable (a write's answer may take `timeout` plus
 one second per 500 KB of its body); 401, 403, 500 `error_saving_ddoc` forbidden, a
 missing database the account may not create -> StoreRefused; 413 (`document_too_large` names the
-document) and 400 on `_bulk_docs` -> BatchTooLarge; 202 on `_bulk_docs` (no write quorum) ->
-the documents are looked up, and StoreUnavailable unless every one is there.
+document) and 400 on `_bulk_docs` -> BatchTooLarge, on a document's own PUT -> that document
+refused on its own merits; 202 (no write quorum) -> the documents are looked up, and
+StoreUnavailable unless every one is there.
 """
 import dataclasses
 import hashlib
@@ -57,6 +67,7 @@ from ros_mongo.storage.chunks import (
     sorted_messages,
 )
 from ros_mongo.storage.couch_client import CouchClient
+from ros_mongo.storage.couch_multipart import inline_document, multipart_document
 from ros_mongo.storage.couch_pages import Pager, id_bound, take
 from ros_mongo.storage.documents import META_KEYS, message_doc, query_conditions, to_selector, topic_doc
 from ros_mongo.storage.mango import compile_selector
@@ -74,6 +85,9 @@ _READ_RETRIES = 4    # a read answered "retry later" is tried this many times (b
 # ten robots draining their spools at once each gave up before the answer came, and sent the
 # same batch again, for minutes.
 _LOADED_SERVER_RATE = 500_000
+#: Seconds attachments go as base64 inside `_bulk_docs` after a multipart write got no answer.
+MULTIPART_PAUSE = 600.0
+_INLINE = "inline"  # a batch item's kind: a document with base64 attachments (see `_encode`)
 
 
 @register_backend("http", "https")
@@ -99,6 +113,7 @@ class CouchStore(MessageStore):
         self.timeout = self.client.timeout
         self.page_size = int(page_size)
         self.indexed: Optional[bool] = None  # whether the Mango indexes exist (None: not known yet)
+        self._multipart_off_until = 0.0  # monotonic time until which attachments go as base64
 
     # -- HTTP (ros_mongo.storage.couch_client: one client, one error mapping) ---------------------------
     def _request(self, method: str, path: str, *, ok=(200, 201, 202), **kwargs) -> requests.Response:
@@ -162,29 +177,29 @@ class CouchStore(MessageStore):
         self.client.close()
 
     # -- writing -----------------------------------------------------------------------------
-    def _batch_item(self, record: MessageRecord) -> Tuple[Tuple[str, bool, Tuple[bytes, ...]], int]:
+    def _batch_item(self, record: MessageRecord) -> Tuple[Tuple[str, Optional[str], Tuple[bytes, ...]], int]:
         chunk = isinstance(record, ChunkRecord)
         blob = chunk or len(record.raw) > self.blob_threshold
-        parts = self._encode(record, blob, chunk)
-        return (record.id, blob, parts), sum(len(part) for part in parts)
+        content_type, parts = self._encode(record, blob, chunk)
+        return (record.id, content_type, parts), sum(len(part) for part in parts)
 
-    def _encode(self, record: MessageRecord, blob: bool, chunk: bool = False) -> Tuple[bytes, ...]:
-        """The document's JSON in parts (joined once, with the whole request: a base64 image is
-        not copied once per document); with its bytes as the attachment `raw` and its revision
-        given (`message_rev`, see `_write_blobs`) when `blob` (always for a chunk: its messages'
-        bytes, concatenated)."""
-        fields64 = None
+    def _encode(self, record: MessageRecord, blob: bool,
+                chunk: bool = False) -> Tuple[Optional[str], Tuple[bytes, ...]]:
+        """(None, the document's JSON) with its bytes inline as base64; when `blob` (always for a
+        chunk: its messages' bytes, concatenated, and its decoded fields) the content type and
+        parts of its `multipart/related` body (see `_put_blob`), or while multipart writes are
+        off (`_put_blob`) `_INLINE` and the document with base64 attachments."""
+        fields = None
         if chunk:  # the decoded fields as an attachment: the server does not parse them
             doc = chunk_doc(record)
             msgs = doc.pop("msgs")
-            encoded = _dumps(msgs) if any(m is not None for m in msgs) else None
-            if encoded is not None:
-                doc["fields"], fields64 = "attachment", pybase64.b64encode(encoded)
+            fields = _dumps(msgs) if any(m is not None for m in msgs) else None
+            if fields is not None:
+                doc["fields"] = "attachment"
         else:
             doc = message_doc(record)
-        raw64 = pybase64.b64encode(record.raw)  # SIMD base64: a tenth of binascii's CPU for images
-        if not blob:
-            doc["raw"] = raw64.decode("ascii")
+        if not blob:  # SIMD base64: a tenth of binascii's CPU
+            doc["raw"] = pybase64.b64encode(record.raw).decode("ascii")
         body = _dumps(doc)
         if body is None or len(body) > MAX_DOC_BYTES:
             doc["msg"], doc["fields_dropped"] = None, True
@@ -193,18 +208,19 @@ class CouchStore(MessageStore):
                 raise StoreError(f"message {record.id} on {record.topic} does not fit a CouchDB "
                                  f"document even without its fields")
         if not blob:
-            return (body,)
-        parts = (b'{"_rev":"', message_rev(record.id).encode("ascii"), b'",', body[1:-1],
-                 b',"_attachments":{"raw":{"content_type":"application/octet-stream","data":"', raw64, b'"}')
-        if fields64 is not None:
-            parts += (b',"fields":{"content_type":"application/octet-stream","data":"', fields64, b'"}')
-        return parts + (b"}}",)
+            return None, (body,)
+        attachments = [("raw", record.raw)] + ([("fields", fields)] if fields is not None else [])
+        if time.monotonic() < self._multipart_off_until:
+            return _INLINE, inline_document(body, message_rev(record.id), attachments)
+        return multipart_document(body, message_rev(record.id), attachments)
 
-    def _write_batch(self, items: List[Tuple[str, bool, Tuple[bytes, ...]]], errors: list) -> int:
+    def _write_batch(self, items: List[Tuple[str, Optional[str], Tuple[bytes, ...]]], errors: list, *,
+                     look_up: bool = True) -> int:
         """Documents with inline bytes in one `_bulk_docs` (a conflict: stored by an earlier
-        attempt), then those with an attachment (`_write_blobs`)."""
-        inline = [body for _, blob, body in items if not blob]
-        blobs = [(doc_id, body) for doc_id, blob, body in items if blob]
+        attempt), then each one with attachments in its own PUT (`_put_blob`); with `look_up`,
+        those stored already (one `_all_docs` lookup) are left alone and not counted."""
+        inline = [parts for _, content_type, parts in items if content_type is None]
+        blobs = [item for item in items if item[1] is not None]
         stored = 0
         if inline:
             response = self._bulk(b'{"docs":[', inline)
@@ -215,31 +231,56 @@ class CouchStore(MessageStore):
             if response.status_code == 202 and written:
                 self._check_durable(written)
             stored += len(written)
-        if blobs:
-            stored += self._write_blobs(blobs, errors)
+        present = self._present([doc_id for doc_id, _, _ in blobs]) if look_up and blobs else set()
+        todo = [item for item in blobs if item[0] not in present]
+        as_json = [(doc_id, parts) for doc_id, kind, parts in todo if kind == _INLINE]
+        if as_json:
+            stored += self._write_inline_blobs(as_json, errors)
+        for doc_id, kind, parts in todo:
+            if kind != _INLINE:
+                stored += self._put_blob(doc_id, kind, parts, errors)
         return stored
 
-    def _write_blobs(self, items: List[Tuple[str, Tuple[bytes, ...]]], errors: list) -> int:
-        """Documents with an attachment not stored yet, each as its first revision `message_rev(id)`
-        (`new_edits: false`, as replication writes them): the server then does not hash each body
-        with its base64 attachment for a revision id (measured: a third of its CPU for 900 KB
-        images). Documents already there (an earlier attempt, deleted by retention) are left
-        alone and not counted; the same id always gets the same revision, so even two writers
-        of one message make no conflict."""
-        present = self._present([doc_id for doc_id, _ in items])
-        todo = [(doc_id, body) for doc_id, body in items if doc_id not in present]
-        if not todo:
-            return 0
-        response = self._bulk(b'{"new_edits":false,"docs":[', [body for _, body in todo])
+    def _write_inline_blobs(self, items: List[Tuple[str, Tuple[bytes, ...]]], errors: list) -> int:
+        """Documents with base64 attachments in one `_bulk_docs` with `new_edits: false` (their
+        revision given, as in `_put_blob`: a document stored already is left as it is)."""
+        response = self._bulk(b'{"new_edits":false,"docs":[', [parts for _, parts in items])
         refused = set()
         for result in _bulk_results(response, self.url):  # new_edits false: only documents not written
             if "error" in result:
                 refused.add(result.get("id"))
                 errors.append(f"{result.get('id')}: {result['error']} {result.get('reason', '')}")
-        written = [doc_id for doc_id, _ in todo if doc_id not in refused]
+        written = [doc_id for doc_id, _ in items if doc_id not in refused]
         if response.status_code == 202 and written:
             self._check_durable(written)
         return len(written)
+
+    def _put_blob(self, doc_id: str, content_type: str, parts: Tuple[bytes, ...], errors: list) -> int:
+        """One document with its attachments: `PUT /db/<id>?new_edits=false` of its multipart body
+        (its revision given: written once however often it is sent, see the module docstring).
+        Refused on its own merits (400, 413): into `errors`, 0. No answer in time: multipart
+        writes are off for `MULTIPART_PAUSE` seconds (an Apache CouchDB cluster with a node down
+        never answers a multipart PUT: measured on 3.5, while `_bulk_docs` answers at once), and
+        StoreUnavailable: the retry sends base64 attachments in `_bulk_docs`."""
+        data = b"".join(parts)
+        try:
+            # the server answers once it has stored the attachments: its time grows with the body
+            response = self._request("PUT", "/" + quote(doc_id, safe=""), ok=(201, 202, 400, 413),
+                                     params={"new_edits": "false"}, data=data,
+                                     headers={"Content-Type": content_type},
+                                     timeout=(self.timeout, self.timeout + len(data) / _LOADED_SERVER_RATE))
+        except StoreUnavailable as err:
+            if isinstance(err.__cause__, requests.Timeout):
+                self._multipart_off_until = time.monotonic() + MULTIPART_PAUSE
+                log.warning("%s did not answer a multipart write in time: attachments go as base64 in "
+                            "_bulk_docs for %.0f s", self.url, MULTIPART_PAUSE)
+            raise
+        if response.status_code in (400, 413):
+            errors.append(f"{doc_id}: {self.client.error(response, 'PUT')}")
+            return 0
+        if response.status_code == 202:
+            self._check_durable([doc_id])
+        return 1
 
     def _bulk(self, head: bytes, bodies: List[Tuple[bytes, ...]]) -> requests.Response:
         """POST `_bulk_docs`: `head` (up to the docs array's "["), the documents' parts, "]}"."""

@@ -177,7 +177,9 @@ class MongoStore(MessageStore):
                 self.blobs.upload_from_stream_with_id(message_id, message_id, raw)
         self._call("store message bytes in GridFS", put)
 
-    def _write_batch(self, items: List[Tuple[dict, Optional[bytes]]], errors: list) -> int:
+    def _write_batch(self, items: List[Tuple[dict, Optional[bytes]]], errors: list, *,
+                     look_up: bool = True) -> int:
+        """(`look_up` changes nothing here: duplicate ids are refused, so the count is exact.)"""
         self._indexes_once()
         blobs = [(doc["_id"], raw) for doc, raw in items if raw is not None]
         if blobs:
