@@ -164,6 +164,7 @@ def run(args) -> dict:
         recorder.wait_for_subscribers(list(RATES) + ["/docked"], timeout=LONG)
         rosbag = ManagedProcess(["rosbag", "record", "-O", str(work / "same.bag"), *RATES], name="rosbag",
                                 log_path=work / "rosbag.log", env=core.env()).start()
+        processes.append(rosbag)  # stopped at the end with the others (it outlived the run before)
         cpu.add("recorder", recorder.node_pid("/ros_mongo_server"))
         cpu.add("rosbag", rosbag.pid)
         watch = CentralWatch(admin_url)
