@@ -19,12 +19,12 @@ from errand_nav.errand import Errand, at_hour_of_week, nearest_clear, remaining_
 from errand_nav.forecast import DensityForecast
 from errand_nav.params import ErrandServerParams
 from errand_nav.planning import CrowdPlanner, PlannedPath
+from errand_nav.ros_forecast import ask_forecast
 from errand_nav.ros_places import PlaceGoals
 from robot_common.gridplan import NoPathError
 from robot_common.maps import load_map, quaternion_to_yaw, yaw_to_quaternion
 from robot_common.ros_maps import grid_to_msg, msg_to_grid
 from robot_common.ros_node import read_config
-from traffic_gp.srv import PredictDensity, PredictDensityRequest
 
 __all__ = ["ErrandServer", "start"]
 
@@ -161,26 +161,8 @@ class ErrandServer:
             self.forecast_note = "no crowd model configured: shortest travel time"
             return DensityForecast.quiet(planner.grid)
         trip = planner.plan(start, goal, departure, DensityForecast.quiet(planner.grid)).duration
-        horizon = min(self.config.forecast_horizon, 1.5 * trip + self.config.forecast_step)
-        count = max(2, int(math.ceil(horizon / self.config.forecast_step)) + 1)
-        stamps = [rospy.Time.from_sec(departure + k * self.config.forecast_step)
-                  for k in range(count)]
-        try:
-            rospy.wait_for_service(self.config.density_service, timeout=2.0)
-            answer = rospy.ServiceProxy(self.config.density_service, PredictDensity)(
-                PredictDensityRequest(stamps=stamps))
-        except (rospy.ROSException, rospy.ServiceException) as err:
-            self.forecast_note = f"no crowd forecast ({err}): shortest travel time"
-            return DensityForecast.quiet(planner.grid)
-        if not answer.success:
-            self.forecast_note = f"no crowd forecast ({answer.message}): shortest travel time"
-            return DensityForecast.quiet(planner.grid)
-        info = answer.info
-        grids = np.asarray(answer.density, float).reshape(len(stamps), info.height, info.width)
-        self.forecast_note = (f"traffic_gp forecast at {len(stamps)} times, "
-                              f"{self.config.forecast_step:g} s apart")
-        return DensityForecast((info.origin.position.x, info.origin.position.y),
-                               info.resolution, np.array([s.to_sec() for s in stamps]), grids)
+        forecast, self.forecast_note = ask_forecast(self.config, departure, trip)
+        return forecast if forecast is not None else DensityForecast.quiet(planner.grid)
 
     def plan(self, start, goal, departure: float, obstacles: np.ndarray = None) -> PlannedPath:
         with self.lock:
