@@ -103,9 +103,12 @@ def test_people_walk_rounds_through_the_halls_and_are_always_there(building):
     sim = FloorSim(grid, floor_walkers(planner, 4, keep_clear=start[:2]), start, planner=planner)
     first = sim.truth()[1]
     assert len(first) == 4 and np.hypot(*(first - start[:2]).T).min() > 1.0
-    seen = []
+    seen, before, steps = [], first, []
     for step in range(1200):                 # a minute: every round (<= 2 x 30 m) ends at least once
         sim.step()
+        now = sim.truth()[1]
+        steps.append(np.hypot(*(now - before).T).max())
+        before = now
         if step % 20 == 0:
             names, positions, velocities = sim.truth()
             assert names == ["person0", "person1", "person2", "person3"]
@@ -115,6 +118,8 @@ def test_people_walk_rounds_through_the_halls_and_are_always_there(building):
     travelled = np.abs(np.diff(np.array(seen), axis=0)).sum(axis=(0, 2))
     assert (travelled > 10.0).all()           # each walked well over 10 m in the minute
     assert sim.hit is None
+    # nobody moves faster than walking, a new round included (rounds end where they begin)
+    assert max(steps) <= 1.3 * sim.dt + 1e-6
 
 
 def test_a_person_waits_for_a_standing_robot_then_turns_back(building):

@@ -230,7 +230,8 @@ class RoundPlanner:
               avoid: Optional[Tuple[float, float, float]] = None, tries: int = 20) -> np.ndarray:
         """Out and back between two spots at least 4 m apart (the first `start` if given) along
         the planner's path round the disc `avoid` (x, y, radius), keeping right (up to 0.5 m off
-        its centre line), a point every 0.5 m. SimError when `tries` pairs give no route."""
+        its centre line), a point every 0.5 m, ending where it began (at `start` when given).
+        SimError when `tries` pairs give no route."""
         grid = self.grid if avoid is None else _blocked(self.grid, *avoid)
         for _ in range(tries):
             ends = self.spots(2)
@@ -245,8 +246,13 @@ class RoundPlanner:
                 continue
             length = path_length(path)
             stations = np.append(np.arange(0.0, length, 0.5), length)
-            return np.vstack([keep_side(grid, path, stations, -1.0, 0.5),
-                              keep_side(grid, path[::-1], stations, -1.0, 0.5)])
+            out = keep_side(grid, path, stations, -1.0, 0.5)
+            back = keep_side(grid, path[::-1], stations, -1.0, 0.5)
+            # a closed loop from the very first point (`start` itself when given): the next
+            # round and a new way round the robot begin where the person stands, never a step
+            # aside in no time
+            first = out[:1] if start is None else np.asarray(start, float).reshape(1, 2)
+            return np.vstack([first, out, back, first])
         raise SimError(f"found no route for a person through the halls in {tries} tries")
 
 
