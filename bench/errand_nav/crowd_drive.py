@@ -78,7 +78,7 @@ def drive(floor: Floor, sim: PeopleSimulator, points: np.ndarray, depart_hours: 
     t = 0.0
     while t < limit:
         crowd.advance(t, depart_hours + t / 3600.0)
-        _step_aside(crowd, pose)
+        step_aside(crowd, pose)
         near = np.hypot(*(crowd.xy - pose).T) if crowd.xy.size else np.zeros(0)
         met.update(crowd.names[near <= meet_radius].tolist())
         if np.hypot(*(pose - points[-1])) < 0.3:
@@ -93,7 +93,7 @@ def drive(floor: Floor, sim: PeopleSimulator, points: np.ndarray, depart_hours: 
         step = _speed(pose, heading, local, speed) * max(0.0, math.cos(turn)) * DT
         waited = waited + DT if step < 0.01 else 0.0
         if waited > 1.0:
-            _make_way(crowd, pose, heading)
+            make_way(crowd, pose, heading)
         moved = pose + step * np.array([math.cos(heading), math.sin(heading)])
         if step and floor.clearance_at(moved[None])[0] < ROBOT_RADIUS + WALL_GAP:
             back = dense[min(progress + 2, len(dense) - 1)] - pose   # too near a wall: back
@@ -109,7 +109,7 @@ def drive(floor: Floor, sim: PeopleSimulator, points: np.ndarray, depart_hours: 
     return DriveOutcome(False, collisions, False, len(met), t)
 
 
-def _step_aside(crowd: Crowd, pose: np.ndarray) -> None:
+def step_aside(crowd: Crowd, pose: np.ndarray) -> None:
     """People who would stand on the robot stand just beside it."""
     if not crowd.xy.size:
         return
@@ -122,7 +122,7 @@ def _step_aside(crowd: Crowd, pose: np.ndarray) -> None:
         crowd.xy[inside] = pose + direction * (ROBOT_RADIUS + PERSON_RADIUS + 0.06)
 
 
-def _make_way(crowd: Crowd, pose: np.ndarray, heading: float) -> None:
+def make_way(crowd: Crowd, pose: np.ndarray, heading: float) -> None:
     """People standing in the robot's lane within 1 m ahead step sideways, away from it."""
     if not crowd.xy.size:
         return
