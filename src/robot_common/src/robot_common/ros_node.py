@@ -19,7 +19,7 @@ from robot_common.maps import quaternion_to_yaw
 from robot_common.params import NodeConfig
 from robot_common.paths import ros_home
 
-__all__ = ["route_logging", "read_config", "ros_home", "run_node", "odom_state"]
+__all__ = ["route_logging", "read_config", "ros_home", "run_node", "odom_state", "pose_2d"]
 
 ConfigT = TypeVar("ConfigT", bound=NodeConfig)
 
@@ -89,3 +89,9 @@ def odom_state(msg) -> list:
     q = pose.orientation
     return [pose.position.x, pose.position.y, quaternion_to_yaw(q.x, q.y, q.z, q.w),
             twist.linear.x, twist.angular.z]
+
+
+def pose_2d(transform) -> Tuple[float, float, float]:
+    """(x, y, yaw) of a geometry_msgs/TransformStamped (a tf lookup), in the plane."""
+    t, r = transform.transform.translation, transform.transform.rotation
+    return t.x, t.y, quaternion_to_yaw(r.x, r.y, r.z, r.w)

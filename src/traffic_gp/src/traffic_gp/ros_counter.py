@@ -20,10 +20,10 @@ from sensor_msgs.msg import LaserScan
 from std_srvs.srv import Trigger, TriggerResponse
 
 from robot_common.cells import CellGrid
-from robot_common.maps import load_map, quaternion_to_yaw
+from robot_common.maps import load_map
 from robot_common.msg import People, PeopleCount, PositionMeasurementArray
 from robot_common.ros_maps import msg_to_grid
-from robot_common.ros_node import read_config
+from robot_common.ros_node import pose_2d, read_config
 from traffic_gp.counting import Detection, PeopleCounter, Scan, Watch
 from traffic_gp.params import PeopleCounterParams
 
@@ -49,12 +49,6 @@ def read_people(kind: str, data: bytes):
     if cls is People:
         return msg.header, [(p.name, p.position.x, p.position.y) for p in msg.people]
     return msg.header, [(p.object_id, p.pos.x, p.pos.y) for p in msg.people]
-
-
-def pose_2d(transform) -> Tuple[float, float, float]:
-    """(x, y, yaw) of a geometry_msgs/TransformStamped."""
-    t, r = transform.transform.translation, transform.transform.rotation
-    return t.x, t.y, quaternion_to_yaw(r.x, r.y, r.z, r.w)
 
 
 class PeopleCounterNode:

@@ -10,8 +10,8 @@ import tf2_ros
 from sensor_msgs.msg import LaserScan
 
 from robot_common.cells import CellGrid
-from robot_common.maps import quaternion_to_yaw
 from robot_common.msg import People, PeopleCount
+from robot_common.ros_node import pose_2d
 from traffic_gp.sim.counting_check import TrueScan
 
 __all__ = ["CountedWatch", "CountingRecorder"]
@@ -68,12 +68,10 @@ class CountingRecorder:
             if stamp.to_sec() not in truth or not self.buffer.can_transform(
                     self.map_frame, scan.header.frame_id, stamp):
                 continue
-            pose = self.buffer.lookup_transform(self.map_frame, scan.header.frame_id, stamp).transform
-            r = pose.rotation
+            pose = pose_2d(self.buffer.lookup_transform(self.map_frame, scan.header.frame_id,
+                                                        stamp))
             people = [(p.name, p.position.x, p.position.y) for p in truth[stamp.to_sec()].people]
-            out.append(TrueScan(stamp.to_sec(), (pose.translation.x, pose.translation.y,
-                                                 quaternion_to_yaw(r.x, r.y, r.z, r.w)),
-                                scan.angle_min, scan.angle_increment,
+            out.append(TrueScan(stamp.to_sec(), pose, scan.angle_min, scan.angle_increment,
                                 np.asarray(scan.ranges, dtype=float), people))
         return out
 
