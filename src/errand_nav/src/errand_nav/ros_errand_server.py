@@ -22,11 +22,27 @@ from errand_nav.planning import CrowdPlanner, PlannedPath
 from errand_nav.ros_forecast import ask_forecast
 from errand_nav.ros_places import PlaceGoals
 from robot_common.gridplan import NoPathError
-from robot_common.maps import load_map, quaternion_to_yaw, yaw_to_quaternion
+from robot_common.maps import load_map, yaw_to_quaternion
 from robot_common.ros_maps import grid_to_msg, msg_to_grid
-from robot_common.ros_node import read_config
+from robot_common.ros_node import pose_2d, read_config
 
 __all__ = ["ErrandServer", "start"]
+
+
+def _moved(pose: Tuple[float, float, float], xy: np.ndarray) -> np.ndarray:
+    """Points (N, 2) given in a frame whose pose in another is `pose` (x, y, yaw), in that
+    other frame."""
+    x, y, yaw = pose
+    c, s = math.cos(yaw), math.sin(yaw)
+    xy = np.asarray(xy, float).reshape(-1, 2)
+    return np.column_stack([x + c * xy[:, 0] - s * xy[:, 1], y + s * xy[:, 0] + c * xy[:, 1]])
+
+
+def _set_pose(pose, x: float, y: float, yaw: float) -> None:
+    """Fill a geometry_msgs/Pose from (x, y, yaw)."""
+    pose.position.x, pose.position.y = float(x), float(y)
+    (pose.orientation.x, pose.orientation.y, pose.orientation.z,
+     pose.orientation.w) = yaw_to_quaternion(yaw)
 
 
 class ErrandServer:
@@ -110,27 +126,21 @@ class ErrandServer:
     # -- geometry ----------------------------------------------------------------------------
     def robot_pose(self, wait: float = 0.5) -> Optional[Tuple[float, float, float]]:
         try:
-            t = self.tf_buffer.lookup_transform(self.config.map_frame, self.config.base_frame,
-                                                rospy.Time(0), rospy.Duration(wait))
+            return pose_2d(self.tf_buffer.lookup_transform(
+                self.config.map_frame, self.config.base_frame, rospy.Time(0), rospy.Duration(wait)))
         except (tf2_ros.LookupException, tf2_ros.ConnectivityException,
                 tf2_ros.ExtrapolationException):
             return None
-        q = t.transform.rotation
-        return (t.transform.translation.x, t.transform.translation.y,
-                quaternion_to_yaw(q.x, q.y, q.z, q.w))
 
     def in_map(self, pose: PoseStamped) -> Tuple[float, float]:
         """(x, y) of a pose in ~map_frame (an empty frame means the map)."""
         frame = pose.header.frame_id.lstrip("/")
         if frame in ("", self.config.map_frame):
             return pose.pose.position.x, pose.pose.position.y
-        t = self.tf_buffer.lookup_transform(self.config.map_frame, frame, rospy.Time(0),
-                                            rospy.Duration(1.0))
-        yaw = quaternion_to_yaw(t.transform.rotation.x, t.transform.rotation.y,
-                                t.transform.rotation.z, t.transform.rotation.w)
-        x, y = pose.pose.position.x, pose.pose.position.y
-        return (t.transform.translation.x + math.cos(yaw) * x - math.sin(yaw) * y,
-                t.transform.translation.y + math.sin(yaw) * x + math.cos(yaw) * y)
+        frame_pose = pose_2d(self.tf_buffer.lookup_transform(
+            self.config.map_frame, frame, rospy.Time(0), rospy.Duration(1.0)))
+        x, y = _moved(frame_pose, [pose.pose.position.x, pose.pose.position.y])[0]
+        return float(x), float(y)
 
     def scan_points(self, near: Tuple[float, float], reach: float) -> np.ndarray:
         """The latest scan's points (map frame) within `reach` m of `near`."""
@@ -139,20 +149,17 @@ class ErrandServer:
         if scan is None:
             return np.zeros((0, 2))
         try:
-            t = self.tf_buffer.lookup_transform(self.config.map_frame, scan.header.frame_id,
-                                                rospy.Time(0), rospy.Duration(0.5))
+            laser = pose_2d(self.tf_buffer.lookup_transform(
+                self.config.map_frame, scan.header.frame_id, rospy.Time(0), rospy.Duration(0.5)))
         except (tf2_ros.LookupException, tf2_ros.ConnectivityException,
                 tf2_ros.ExtrapolationException):
             return np.zeros((0, 2))
-        q = t.transform.rotation
-        yaw = quaternion_to_yaw(q.x, q.y, q.z, q.w)
         ranges = np.asarray(scan.ranges, float)
-        angles = scan.angle_min + scan.angle_increment * np.arange(len(ranges)) + yaw
+        angles = scan.angle_min + scan.angle_increment * np.arange(len(ranges))
         ok = np.isfinite(ranges) & (ranges > scan.range_min) & (ranges < scan.range_max)
-        xs = t.transform.translation.x + ranges[ok] * np.cos(angles[ok])
-        ys = t.transform.translation.y + ranges[ok] * np.sin(angles[ok])
-        points = np.column_stack([xs, ys])
-        return points[np.hypot(xs - near[0], ys - near[1]) <= reach]
+        points = _moved(laser, np.column_stack([ranges[ok] * np.cos(angles[ok]),
+                                                ranges[ok] * np.sin(angles[ok])]))
+        return points[np.hypot(points[:, 0] - near[0], points[:, 1] - near[1]) <= reach]
 
     # -- planning ----------------------------------------------------------------------------
     def forecast(self, planner: CrowdPlanner, start, goal, departure: float) -> DensityForecast:
@@ -178,18 +185,19 @@ class ErrandServer:
         return planner.plan(start, goal, departure,
                             self.forecast(planner, start, goal, departure))
 
-    def path_msg(self, planned: PlannedPath) -> Path:
+    def path_msg(self, planned: PlannedPath, frame: str = "",
+                 frame_pose: Tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Path:
+        """The plan as a nav_msgs/Path in the map frame, or in `frame` where the map frame's
+        pose is `frame_pose` (x, y, yaw)."""
         msg = Path()
-        msg.header.frame_id = self.config.map_frame
+        msg.header.frame_id = frame or self.config.map_frame
         msg.header.stamp = rospy.Time.from_sec(float(planned.times[0]))
-        points = planned.points
+        points = _moved(frame_pose, planned.points)
         for i, ((x, y), when) in enumerate(zip(points, planned.times)):
             ahead = points[min(i + 1, len(points) - 1)] - points[max(i - 1, 0)]
             pose = PoseStamped()
             pose.header.frame_id, pose.header.stamp = msg.header.frame_id, rospy.Time.from_sec(when)
-            pose.pose.position.x, pose.pose.position.y = float(x), float(y)
-            (pose.pose.orientation.x, pose.pose.orientation.y, pose.pose.orientation.z,
-             pose.pose.orientation.w) = yaw_to_quaternion(math.atan2(ahead[1], ahead[0]))
+            _set_pose(pose.pose, x, y, math.atan2(ahead[1], ahead[0]))
             msg.poses.append(pose)
         return msg
 
@@ -199,25 +207,13 @@ class ErrandServer:
         self.plan_pub.publish(msg)
         frame = self.config.controller_frame or self.config.map_frame
         if frame != self.config.map_frame:
-            t = self.tf_buffer.lookup_transform(frame, self.config.map_frame, rospy.Time(0),
-                                                rospy.Duration(1.0))
-            q = t.transform.rotation
-            yaw = quaternion_to_yaw(q.x, q.y, q.z, q.w)
-            c, s = math.cos(yaw), math.sin(yaw)
-            msg.header.frame_id = frame
-            for pose in msg.poses:
-                x, y = pose.pose.position.x, pose.pose.position.y
-                pose.header.frame_id = frame
-                pose.pose.position.x = t.transform.translation.x + c * x - s * y
-                pose.pose.position.y = t.transform.translation.y + s * x + c * y
-                heading = quaternion_to_yaw(pose.pose.orientation.x, pose.pose.orientation.y,
-                                            pose.pose.orientation.z, pose.pose.orientation.w)
-                (pose.pose.orientation.x, pose.pose.orientation.y, pose.pose.orientation.z,
-                 pose.pose.orientation.w) = yaw_to_quaternion(heading + yaw)
+            msg = self.path_msg(planned, frame, pose_2d(self.tf_buffer.lookup_transform(
+                frame, self.config.map_frame, rospy.Time(0), rospy.Duration(1.0))))
         self.path_pub.publish(msg)
 
     def on_make_plan(self, request):
-        departure = request.start.header.stamp.to_sec() or self.crowd_time(rospy.Time.now())
+        departure = request.start.header.stamp.to_sec() or \
+            rospy.Time.now().to_sec() + self.crowd_offset
         try:
             if request.start.header.frame_id:
                 start = self.in_map(request.start)
@@ -232,10 +228,6 @@ class ErrandServer:
             return GetPlanResponse()
         rospy.loginfo(f"errand_server: ~make_plan: {self.describe(planned)}")
         return GetPlanResponse(plan=self.path_msg(planned))
-
-    def crowd_time(self, stamp) -> float:
-        """The time (s) whose crowd a plan made at clock time `stamp` is for."""
-        return stamp.to_sec() + self.crowd_offset
 
     @staticmethod
     def describe(planned: PlannedPath) -> str:
@@ -353,16 +345,12 @@ class ErrandServer:
         if fresh.cost < (1.0 - self.config.switch_gain) * kept.cost:
             self.follow(errand, fresh, now, f"the crowd forecast changed: {fresh.cost:.0f} "
                                             f"against {kept.cost:.0f} s-equivalent")
-        errand.last_plan = now
 
     def publish_feedback(self, pose) -> None:
         feedback = MoveBaseFeedback()
         feedback.base_position.header.frame_id = self.config.map_frame
         feedback.base_position.header.stamp = rospy.Time.now()
-        feedback.base_position.pose.position.x, feedback.base_position.pose.position.y = pose[:2]
-        (feedback.base_position.pose.orientation.x, feedback.base_position.pose.orientation.y,
-         feedback.base_position.pose.orientation.z,
-         feedback.base_position.pose.orientation.w) = yaw_to_quaternion(pose[2])
+        _set_pose(feedback.base_position.pose, *pose)
         self.server.publish_feedback(feedback)
 
     def report(self) -> None:
