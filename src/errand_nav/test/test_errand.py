@@ -23,7 +23,7 @@ PATH = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 5.0]])   # 15 m with a corner
 
 
 def errand():
-    job = Errand((10.0, 5.0), RULES, started=0.0)
+    job = Errand((10.0, 5.0), RULES)
     job.follow(PATH, now=0.0)
     return job
 

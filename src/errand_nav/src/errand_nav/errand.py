@@ -52,7 +52,6 @@ class Errand:
 
     goal: Sequence[float]
     rules: ErrandRules
-    started: float
     path: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     best_remaining: float = math.inf
     last_progress: float = 0.0
@@ -86,7 +85,7 @@ class Errand:
         if self.distance_to_goal(xy) <= self.rules.goal_tolerance:
             return Verdict("arrived", f"within {self.rules.goal_tolerance:g} m of the goal")
         left = self.remaining(xy)
-        if left < self.best_remaining - self.rules.progress_step or math.isinf(self.best_remaining):
+        if left < self.best_remaining - self.rules.progress_step:
             self.best_remaining, self.last_progress = left, now
         held = now - self.last_progress
         if held > self.rules.blocked_after:

@@ -286,7 +286,7 @@ class ErrandServer:
             target = tuple(planned.points[-1])      # where it fits, within ~snap_radius
         except (NoPathError, tf2_ros.TransformException) as err:
             return self.finish("aborted", f"no path: {err}")
-        errand = Errand(target, self.rules, now)
+        errand = Errand(target, self.rules)
         self.controller(True)
         self.follow(errand, planned, now, "planned")
         rate = rospy.Rate(self.config.check_rate)

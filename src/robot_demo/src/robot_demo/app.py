@@ -11,6 +11,7 @@ import argparse
 import os
 import signal
 import socket
+import threading
 import time
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple, Type, TypeVar
@@ -57,6 +58,8 @@ class Demo:
         self.output = output
         self.launches = LaunchSet(core, output / "logs")
         self.background: Dict[str, ManagedProcess] = {}
+        # jobs a chapter's `prepare` queued to start later: set once each has ended
+        self.queued: Dict[str, threading.Event] = {}
 
     def start_background(self, name: str, argv: List[str]) -> ManagedProcess:
         """Start a long job (e.g. training a model) now, beside the chapters; its output goes to

@@ -61,13 +61,12 @@ def prepare(demo) -> None:
         finally:                                   # a failure is reported by the chapter
             for event in ready.values():
                 event.set()
-    demo.queued = getattr(demo, "queued", {})
     demo.queued.update(ready)
     threading.Thread(target=one_after_another, name="errand_training", daemon=True).start()
 
 
 def _finished(demo, name: str, what: str) -> None:
-    queued = getattr(demo, "queued", {}).get(name)
+    queued = demo.queued.get(name)
     if queued is None:
         return
     waits.wait_until(queued.is_set, 900, what, interval=0.5)
@@ -84,8 +83,6 @@ def run(demo) -> None:
     from errand_nav.srv import GoToPlace
     from robot_sim.building import generate_building
 
-    if not getattr(demo, "queued", None):
-        prepare(demo)                              # --only errands without the demo's start
     building = generate_building(SEED, loop=True)
     if next(a.box for a in building.halls if a.name == "main_hall") != MAIN_HALL:
         raise RuntimeError("the generated building's main hall moved")
