@@ -9,11 +9,18 @@ import pytest
 from lfd_controller.hallway import (
     HALLWAY_DRIVING,
     HallwayController,
+    TaskBuilder,
     fit_hallway_reward,
     hallway_acceptance,
     hallway_windows,
 )
-from lfd_controller.hallway_features import HallwayFeatures, HallwayTask, PathFollower, scan_points
+from lfd_controller.hallway_features import (
+    HallwayFeatures,
+    HallwayTask,
+    PathFollower,
+    in_sight,
+    scan_points,
+)
 from lfd_controller.rewards import LinearReward
 from lfd_controller.sim.hallway_people import HallwayDriver, drive_figures, hallway_demonstration
 from robot_common.maps import FREE, OCCUPIED, GridMap
@@ -82,6 +89,19 @@ def test_the_waypoint_moves_along_the_path_and_waits_at_a_corner():
     # nothing round the corner is in sight: the waypoint stays on the first leg
     waypoint = follower.update([4.0, 0.0], visible=lambda point: point[1] < 0.1)
     assert waypoint[1] < 0.1 and waypoint[0] <= 5.0
+
+
+def test_a_person_on_the_path_hides_it_but_does_not_pull_the_waypoint_in():
+    path = np.array([[0.0, 0.0], [10.0, 0.0]])
+    angles = np.linspace(-math.pi, math.pi, 72, endpoint=False)
+    ranges = np.full(72, 9.0)
+    ranges[np.abs(angles) < 0.2] = 1.25             # ahead: something's front at 1.25 m
+    hidden = PathFollower(path, lookahead=4.0).update([0.0, 0.0], in_sight(
+        (0.0, 0.0, 0.0), angles, ranges))
+    assert hidden[0] == pytest.approx(0.75)     # untracked: the waypoint waits 0.3 m in front
+    builder = TaskBuilder(path, lookahead=4.0)
+    task = builder(np.zeros(5), 0.0, angles, ranges, [[1.5, 0.0]], [[0.0, 0.0]])
+    np.testing.assert_allclose(task.waypoint, [4.0, 0.0])   # a tracked person: 4 m ahead
 
 
 def test_the_scan_gives_one_nearest_point_per_sector_and_leaves_people_out():

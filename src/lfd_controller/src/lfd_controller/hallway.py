@@ -49,8 +49,8 @@ __all__ = ["HALLWAY_DRIVING", "HALLWAY_SAFETY", "room_margin", "TaskBuilder", "H
 # discount 0.97, a barrier 0.1 m beyond touching, a safety stop (zero speed; turning in place
 # allowed) when moving on would bring the scan within 0.05 m of the robot's edge, the path
 # reported blocked after 20 s held up, the local waypoint 4 m ahead on the path or the furthest
-# point up to there in the scan's sight (further than a 4 s window or the look-ahead travels: a
-# waypoint passed inside a window turns its progress feature around).
+# point up to there in the scan's sight, tracked people hiding nothing (further than a 4 s window
+# or the look-ahead travels: a waypoint passed inside a window turns its progress feature around).
 HALLWAY_DRIVING = {"horizon": 12, "plan_dt": 0.4, "terminal": 0.0, "spread_seeds": True,
                    "discount": 0.97, "max_iter": 12, "seed_turns": (0.0, 1.0, -1.0),
                    "detour": 0.9, "unstall": 2.0}
@@ -101,7 +101,8 @@ class TaskBuilder:
     def __call__(self, state, t: float, angles, ranges, people, velocities) -> HallwayTask:
         laser = (state[0] + self.laser_offset * math.cos(state[2]),
                  state[1] + self.laser_offset * math.sin(state[2]), state[2])
-        waypoint = self.follower.update(state[:2], in_sight(laser, angles, ranges))
+        waypoint = self.follower.update(state[:2], in_sight(laser, angles, ranges,
+                                                            people=people))
         return task_from_view(waypoint, self.goal, state, angles, ranges, people, velocities, t,
                               self.laser_offset)
 

@@ -104,10 +104,23 @@ class HallwayTask:
         return things[first], motion[first]
 
 
-def in_sight(pose, angles, ranges, *, margin: float = 0.3) -> Callable[[np.ndarray], bool]:
-    """point -> True when the scan's nearest beam toward it reaches `margin` m past it."""
+def in_sight(pose, angles, ranges, *, margin: float = 0.3, people: Optional[np.ndarray] = None,
+             person_radius: float = 0.35) -> Callable[[np.ndarray], bool]:
+    """point -> True when the scan's nearest beam toward it reaches `margin` m past it. A beam
+    that ends on a tracked person (within `person_radius` of one, as in `scan_points`) counts as
+    open: a person hides the path behind them but is no wall, and a waypoint pulled in front of
+    everyone in a crowd would have the robot creep (a waypoint it could pass within its
+    look-ahead turns its progress feature around)."""
     x, y, yaw = (float(v) for v in pose[:3])
     angles, ranges = np.asarray(angles, float), np.asarray(ranges, float)
+    if people is not None and len(people) and len(ranges):
+        people = np.asarray(people, float).reshape(-1, 2)
+        with np.errstate(invalid="ignore"):
+            ends = np.column_stack([x + ranges * np.cos(yaw + angles),
+                                    y + ranges * np.sin(yaw + angles)])
+            gap = np.hypot(ends[:, None, 0] - people[None, :, 0],
+                           ends[:, None, 1] - people[None, :, 1]).min(axis=1)
+        ranges = np.where(np.isfinite(ranges) & (gap < person_radius), np.inf, ranges)
 
     def visible(point) -> bool:
         if not len(angles):
