@@ -74,7 +74,7 @@ def drive(floor: Floor, sim: PeopleSimulator, points: np.ndarray, depart_hours: 
     pose = np.array(points[0], float)
     heading = math.atan2(*(dense[min(5, len(dense) - 1)] - pose)[::-1])
     progress, met, collisions, waited = 0, set(), 0, 0.0
-    limit = arc[-1] / 0.15 + 60.0
+    limit = time_limit(arc[-1])
     t = 0.0
     while t < limit:
         crowd.advance(t, depart_hours + t / 3600.0)
@@ -120,6 +120,12 @@ def step_aside(crowd: Crowd, pose: np.ndarray) -> None:
         direction = offset[inside] / np.maximum(gap[inside], 1e-6)[:, None]
         direction[gap[inside] < 1e-6] = (1.0, 0.0)
         crowd.xy[inside] = pose + direction * (ROBOT_RADIUS + PERSON_RADIUS + 0.06)
+
+
+def time_limit(length: float) -> float:
+    """Seconds a drive of a `length` m path has, for every driver: the path at 0.15 m/s plus
+    60 s (a drive still under way then counts as not reached)."""
+    return length / 0.15 + 60.0
 
 
 def make_way(crowd: Crowd, pose: np.ndarray, heading: float) -> None:

@@ -27,7 +27,11 @@ fixed without F's drives):
     the person's; the learned controller's cycle time (wall clock, whole cycle: scan points,
     waypoint, planning) over the scenes with 8 people.
 
-Resumable (artifacts/bench/lfd_building/<family>.json); --phase table prints the table.
+Transfer: `--train levine_4th_good` has the person teach on that real floor instead and tests on
+the other (`--tests` names test maps); settings are still chosen on the generated building.
+
+Resumable (artifacts/bench/lfd_building/<family>.json, or train_<floor>/ for a transfer run);
+--phase table prints the table.
 Run it as `OMP_NUM_THREADS=1 nice -n 10 python bench/lfd_controller/lfd_building.py`.
 """
 import argparse
@@ -35,6 +39,7 @@ import json
 import os
 import sys
 from pathlib import Path
+from typing import Optional, Sequence
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
@@ -58,13 +63,22 @@ SF_GRID = {"speed": (0.4, 0.55), "push": (0.5, 1.5), "reach": (0.3, 0.6)}
 DWA_GRID = {"v_max": (0.4, 0.55), "clearance_weight": (0.5, 2.0), "margin": (0.05, 0.15)}
 
 
-def floors():
-    train = ("generated", generate_building(0).grid)
+def floors(train: str = "generated", tests: Optional[Sequence[str]] = None):
+    """(choice floor grid, teaching floor grid, [(name, grid)] test floors). Settings are always
+    chosen on the generated building; `train` names the floor the person teaches on (the
+    generated building or a map in ../shared/data/maps: a transfer run), `tests` the test maps
+    (default: the Levine floors other than `train`)."""
+    chosen = generate_building(0).grid
+    taught = chosen if train == "generated" else load_map(MAPS / f"{train}.yaml")
     if MAPS.is_dir():
-        tests = [(name, load_map(MAPS / f"{name}.yaml")) for name in ("levine_4th_good", "levine_6th")]
-    else:
-        tests = [("generated_seed7", generate_building(7, rooms_per_side=7).grid)]
-    return train, tests
+        names = tests or [n for n in ("levine_4th_good", "levine_6th") if n != train]
+        return chosen, taught, [(name, load_map(MAPS / f"{name}.yaml")) for name in names]
+    return chosen, taught, [("generated_seed7", generate_building(7, rooms_per_side=7).grid)]
+
+
+def out_dir() -> Path:
+    """Where the rows go: one folder per teaching floor."""
+    return OUT if ARGS.train == "generated" else OUT / f"train_{ARGS.train}"
 
 
 def view_policy(act_on_task, scene):
@@ -90,9 +104,9 @@ def success_score(runs):
         [r["time"] if r["success"] else 400.0 for r in runs]) / 100.0
 
 
-def tuned_baselines(train_grid):
-    path = OUT / "baselines.json"
-    validation = scenes(train_grid, "validation", range(500, 503))
+def tuned_baselines(choice_grid):
+    path = out_dir() / "baselines.json"
+    validation = scenes(choice_grid, "validation", range(500, 503))
     sf, sf_table = tune(SocialForceController, SF_GRID,
                         lambda c: success_score([drive_baseline(s, c) for s in validation]))
     dwa, dwa_table = tune(SamplingController, DWA_GRID,
@@ -142,7 +156,7 @@ def table():
           "closest learned vs person (median m) | acceptance |")
     print("|" + " --- |" * (len(methods) + 5))
     cycles8 = []
-    for path in sorted(OUT.glob("*.json")):
+    for path in sorted(out_dir().glob("*.json")):
         if path.name == "baselines.json":
             continue
         data = json.loads(path.read_text())
@@ -172,15 +186,15 @@ def table():
 
 
 def main():
-    OUT.mkdir(parents=True, exist_ok=True)
+    out_dir().mkdir(parents=True, exist_ok=True)
     if ARGS.phase == "table":
         table()
         return 0
-    (_, train_grid), tests = floors()
-    sf, dwa, validation = tuned_baselines(train_grid)
+    choice_grid, train_grid, tests = floors(ARGS.train, ARGS.tests)
+    sf, dwa, validation = tuned_baselines(choice_grid)
     print(f"tuned: social force {sf.get_params()}, sampling {dwa.get_params()}", flush=True)
     for family in ARGS.families:
-        path = OUT / f"{family}.json"
+        path = out_dir() / f"{family}.json"
         if path.exists():
             continue
         row = family_row(family, train_grid, tests, sf, dwa, validation, ARGS.demos)
@@ -195,5 +209,8 @@ if __name__ == "__main__":
     parser.add_argument("--families", nargs="+", default=sorted(FAMILIES))
     parser.add_argument("--demos", type=int, default=6, help="demonstrations per family")
     parser.add_argument("--scenes", type=int, default=3, help="test scenes per test floor")
+    parser.add_argument("--train", default="generated",
+                        help="the floor the person teaches on: generated or a map name (transfer)")
+    parser.add_argument("--tests", nargs="+", default=None, help="test map names")
     ARGS = parser.parse_args()
     sys.exit(main())
