@@ -1,5 +1,6 @@
 """DemoRecorderNode: records demonstrations from the robot's topics into bags and the database."""
 import threading
+from collections import deque
 from pathlib import Path
 from typing import Optional
 
@@ -71,6 +72,8 @@ class DemoRecorderNode:
         self.exact = config.use_applied_cmd
         self.scenario, self.raw, self.count = None, [], 0
         self.latest_cmd, self.first_stamp, self.path = (0.0, 0.0), None, None
+        # topic -> the newest scan / people / sim_time messages (a few: topics arrive in any order)
+        self.sensors = {topic: deque(maxlen=5) for topic in ("/scan", "/people", "/sim_time")}
         self.demos = self.recording = None
 
     def setup(self) -> "DemoRecorderNode":
@@ -126,6 +129,8 @@ class DemoRecorderNode:
                      ("/cmd_vel_applied", msg, msg.header.stamp))
 
     def on_time(self, msg):
+        with self.lock:
+            self.sensors["/sim_time"].append(msg)
         self._sample(msg.header.stamp, "time", msg.time_ref.to_sec(), ("/sim_time", msg, msg.header.stamp))
 
     def on_path(self, msg):
@@ -136,6 +141,7 @@ class DemoRecorderNode:
 
     def on_sensor(self, msg, topic):
         with self.lock:
+            self.sensors[topic].append(msg)
             if self.builder.recording:
                 self.raw.append((topic, msg, msg.header.stamp))
 
@@ -151,7 +157,12 @@ class DemoRecorderNode:
                 self.builder.start()
             except DemonstrationError as err:
                 return TriggerResponse(False, str(err))
+            # the path, and what the robot saw at the step the recording starts from with that
+            # step's clock (a simulator publishes a step's scan after its odometry: it may
+            # have come before ~start)
             self.raw = [] if self.path is None else [("/path", self.path, _stamp(self.path))]
+            self.raw += [(topic, msg, msg.header.stamp) for topic, kept in self.sensors.items()
+                         for msg in kept]
         self.recording.publish(Bool(True))
         return TriggerResponse(True, f"recording demonstration {self.count + 1} in {self.scenario.name}")
 

@@ -46,6 +46,18 @@ class HallwayDriver:
         return self
 
     def __call__(self, state, t: float, observation) -> np.ndarray:
+        self.look(state, t, observation)
+        return self.person.command(state, t)
+
+    def axes(self, state, t: float, observation) -> List[float]:
+        """The stick this person holds now (sensor_msgs/Joy axes, with `person.buttons()` the
+        dead-man button): for driving through a joystick topic and joy_teleop, which turns it
+        into the command `__call__` gives."""
+        self.look(state, t, observation)
+        return self.person.axes(state, t)
+
+    def look(self, state, t: float, observation) -> None:
+        """What the person sees at this step: the carrot as goal, the threat as obstacle."""
         carrot = self.follower.update(state[:2])
         self.tasks.append(self.seen(state, t, observation.angles, observation.ranges,
                                     observation.people, observation.velocities))
@@ -55,7 +67,6 @@ class HallwayDriver:
             obstacle=ObstacleMotion(float(threat[0] - t * velocity[0]),
                                     float(threat[1] - t * velocity[1]), radius, "linear",
                                     tuple(float(v) for v in velocity)))
-        return self.person.command(state, t)
 
     def _threat(self, state, task, carrot) -> Tuple[np.ndarray, np.ndarray, float]:
         """(position, velocity, radius) of what comes closest within 2 s (far away: nothing)."""
