@@ -104,6 +104,23 @@ def test_a_person_on_the_path_hides_it_but_does_not_pull_the_waypoint_in():
     np.testing.assert_allclose(task.waypoint, [4.0, 0.0])   # a tracked person: 4 m ahead
 
 
+def test_the_controller_aims_through_the_goal_so_its_pull_does_not_fade_there():
+    path = np.array([[0.0, 0.0], [10.0, 0.0]])
+    angles = np.linspace(-math.pi, math.pi, 72, endpoint=False)
+    ranges = np.full(72, 9.0)
+    state = np.array([9.67, 0.0, math.pi, 0.0, 0.0])       # 0.33 m short, facing away
+    plain = TaskBuilder(path, lookahead=4.0)(state, 0.0, angles, ranges, [], [])
+    np.testing.assert_allclose(plain.waypoint, [10.0, 0.0])
+    arriving = TaskBuilder(path, lookahead=4.0, through_goal=True)(state, 0.0, angles, ranges,
+                                                                   [], [])
+    np.testing.assert_allclose(arriving.waypoint, [13.67, 0.0])
+    np.testing.assert_allclose(arriving.destination, [10.0, 0.0])
+    ranges[np.abs(angles) < 0.2] = 0.2                     # the goal hidden: the plain waypoint
+    hidden = TaskBuilder(path, lookahead=4.0, through_goal=True)(
+        np.array([9.67, 0.0, 0.0, 0.0, 0.0]), 0.0, angles, ranges, [], [])
+    assert hidden.waypoint[0] <= 10.0
+
+
 def test_the_scan_gives_one_nearest_point_per_sector_and_leaves_people_out():
     angles = np.linspace(-math.pi, math.pi, 8, endpoint=False)
     ranges = np.array([1.0, 9.0, 9.0, 9.0, 0.5, 0.6, 9.0, 9.0])   # 0.5 m ahead, 1 m behind

@@ -50,7 +50,8 @@ __all__ = ["HALLWAY_DRIVING", "HALLWAY_SAFETY", "room_margin", "TaskBuilder", "H
 # allowed) when moving on would bring the scan within 0.05 m of the robot's edge, the path
 # reported blocked after 20 s held up, the local waypoint 4 m ahead on the path or the furthest
 # point up to there in the scan's sight, tracked people hiding nothing (further than a 4 s window
-# or the look-ahead travels: a waypoint passed inside a window turns its progress feature around).
+# or the look-ahead travels: a waypoint passed inside a window turns its progress feature around);
+# on the last stretch, the goal in sight, the waypoint 4 m away through the goal (TaskBuilder).
 HALLWAY_DRIVING = {"horizon": 12, "plan_dt": 0.4, "terminal": 0.0, "spread_seeds": True,
                    "discount": 0.97, "max_iter": 12, "seed_turns": (0.0, 1.0, -1.0),
                    "detour": 0.9, "unstall": 2.0}
@@ -88,11 +89,20 @@ def task_from_view(waypoint, goal, pose, angles, ranges, people, velocities, now
 class TaskBuilder:
     """The HallwayTask of each cycle along one path: the local waypoint (PathFollower, in the
     scan's sight) and task_from_view. What the controller, the recorded demonstrations and the
-    benchmark's baselines all plan with."""
+    benchmark's baselines all plan with.
 
-    def __init__(self, path, *, lookahead: float = 4.0, laser_offset: float = 0.0):
+    `through_goal` (the controller's arrival): once the waypoint is the path's end and the goal
+    is in sight, the waypoint is `lookahead` m from the robot through the goal, so the pull
+    toward it keeps its strength to the end (the progress feature fades within its softening
+    of the waypoint: next to a wall the robot settled a few cm outside the goal tolerance)
+    and the controller stops inside the tolerance. Demonstrations keep the plain waypoint: the
+    person slows down for the goal."""
+
+    def __init__(self, path, *, lookahead: float = 4.0, laser_offset: float = 0.0,
+                 through_goal: bool = False):
         self.follower = PathFollower(path, lookahead=lookahead)
         self.laser_offset = float(laser_offset)
+        self.through_goal = bool(through_goal)
 
     @property
     def goal(self) -> np.ndarray:
@@ -101,8 +111,14 @@ class TaskBuilder:
     def __call__(self, state, t: float, angles, ranges, people, velocities) -> HallwayTask:
         laser = (state[0] + self.laser_offset * math.cos(state[2]),
                  state[1] + self.laser_offset * math.sin(state[2]), state[2])
-        waypoint = self.follower.update(state[:2], in_sight(laser, angles, ranges,
-                                                            people=people))
+        visible = in_sight(laser, angles, ranges, people=people)
+        waypoint = self.follower.update(state[:2], visible)
+        if self.through_goal and np.allclose(waypoint, self.goal) and visible(self.goal):
+            offset = self.goal - np.asarray(state[:2], float)
+            distance = float(np.hypot(*offset))
+            if distance > 1e-6:
+                waypoint = np.asarray(state[:2], float) + offset * (
+                    max(distance, self.follower.lookahead) / distance)
         return task_from_view(waypoint, self.goal, state, angles, ranges, people, velocities, t,
                               self.laser_offset)
 
@@ -157,7 +173,7 @@ class HallwayController:
 
     def __post_init__(self):
         self.task = TaskBuilder(self.path, lookahead=self.safety["lookahead"],
-                                laser_offset=self.laser_offset)
+                                laser_offset=self.laser_offset, through_goal=True)
         self.follower = self.task.follower
         planned = HallwayBarrier(self.reward, robot_radius=self.safety["robot_radius"],
                                  person_radius=self.safety["person_radius"],
