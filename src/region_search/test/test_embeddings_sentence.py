@@ -1,6 +1,6 @@
 """The sentence backend (all-MiniLM-L6-v2, loaded once for this module) and the choice of backend
 with its fallback to word2vec (no ROS here). The shipped phrase-level ranking on it is checked
-through the nodes (test_region_search.py: the generated building's places, room numbers, typos)."""
+through the nodes (test_start_up.py: the generated building's places, room numbers, typos)."""
 import json
 import subprocess
 import sys

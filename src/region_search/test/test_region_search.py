@@ -2,10 +2,12 @@
 with launch/region_search.launch), a label file of the generated building, and the real
 igmm_layers layer server's regions layer (reached through its LocateObjects service).
 
-The default backend (the sentence model all-MiniLM-L6-v2) is checked on clear cases; its fallback
-to word2vec is produced for real (a model folder that holds no model). The word2vec tests serve a
-small hand-made word2vec text file (backend word2vec, a "pretrained" model), so the expected
-answers are known without training; the full models belong to bench/ and the demo.
+These tests serve a small hand-made word2vec text file (backend word2vec, a "pretrained" model),
+so the expected answers are known without training; the full models belong to bench/ and the
+demo. One embedding server (embedding_server.launch) serves that file to the whole module; each
+test starts its own recommender (region_search.launch without its embedding server). The default
+backend (the sentence model all-MiniLM-L6-v2) and its fallback when the model is missing are
+checked in test_start_up.py, where a sentence server starts anyway.
 """
 
 import numpy as np
@@ -16,7 +18,7 @@ from std_msgs.msg import Header
 from region_search.srv import Embed, PhraseSimilarity, RecommendRegion
 from robot_common.msg import ObjectObservation
 from robot_sim.building import generate_building
-from ros_harness import wait_until
+from ros_harness import LaunchSet, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -66,21 +68,32 @@ def wait_for_model(rospy_node, timeout):
                interval=0.25, what="the embedding server's model to be ready (~active_backend set)")
 
 
-def start_region_search(roslaunch, rospy_node, files, **args):
-    """region_search.launch serving the hand-made word2vec space (unless `args` say otherwise);
-    the no-match margin belongs to real models' scores, so these always rank."""
-    settings = dict(backend="word2vec", source="pretrained",
-                    pretrained_path=str(files / "vectors.txt"), cache_dir=str(files / "cache"),
-                    remove_components=-1, answer_no_match="false")
-    settings.update(args)
-    launch = roslaunch("region_search", "region_search.launch", **settings)
-    launch.wait_for_services(SERVICES, timeout=90)
+@pytest.fixture(scope="module")
+def word2vec_server(roscore, rospy_node, files, tmp_path_factory):
+    """The embedding server serving the hand-made word2vec space, one for the module's tests."""
+    launches = LaunchSet(roscore, tmp_path_factory.mktemp("word2vec_server"))
+    launch = launches("region_search", "embedding_server.launch", backend="word2vec",
+                      source="pretrained", pretrained_path=str(files / "vectors.txt"),
+                      cache_dir=str(files / "cache"), remove_components=-1)
+    launch.wait_for_services(SERVICES[:2], timeout=90)
     wait_for_model(rospy_node, 120)
+    yield launch
+    launches.stop_all()
+
+
+def start_region_search(roslaunch, word2vec_server, **args):
+    """region_search.launch's recommender on the module's word2vec server; the no-match margin
+    belongs to real models' scores, so these always rank."""
+    launch = roslaunch("region_search", "region_search.launch", start_embedding_server="false",
+                       answer_no_match="false", **args)
+    launch.wait_for_services(SERVICES, timeout=90)
+    assert word2vec_server.process.alive, word2vec_server.log_tail()
     return launch
 
 
-def test_phrases_find_their_labelled_regions_with_positions(roslaunch, rospy_node, files, building):
-    start_region_search(roslaunch, rospy_node, files, labels_path=str(files / "labels.json"),
+def test_phrases_find_their_labelled_regions_with_positions(roslaunch, rospy_node, files, building,
+                                                           word2vec_server):
+    start_region_search(roslaunch, word2vec_server, labels_path=str(files / "labels.json"),
                         layer_service="")
     recommend = rospy_node.ServiceProxy("/region_recommender/recommend", RecommendRegion)
     for phrase, best in [("drinking fountain", "water_fountain"), ("wash my hands", "bathroom"),
@@ -128,8 +141,9 @@ def check_embedding_server_answers_vectors_and_batch_similarity(rospy_node):
     assert not bad.success and "unknown similarity method" in bad.message
 
 
-def test_empty_phrase_and_missing_labels_get_success_false(roslaunch, rospy_node, files):
-    start_region_search(roslaunch, rospy_node, files, labels_path=str(files / "no_such_labels.json"),
+def test_empty_phrase_and_missing_labels_get_success_false(roslaunch, rospy_node, files,
+                                                           word2vec_server):
+    start_region_search(roslaunch, word2vec_server, labels_path=str(files / "no_such_labels.json"),
                         layer_service="")
     recommend = rospy_node.ServiceProxy("/region_recommender/recommend", RecommendRegion)
     response = recommend(phrase="drinking fountain", top_k=1)
@@ -147,12 +161,12 @@ def test_empty_phrase_and_missing_labels_get_success_false(roslaunch, rospy_node
         (files / "no_such_labels.json").unlink()
 
 
-def test_regions_layer_of_the_layer_server_is_searched_too(roslaunch, rospy_node, files):
+def test_regions_layer_of_the_layer_server_is_searched_too(roslaunch, rospy_node, word2vec_server):
     """The labelled places come from the real layer server (no label file): place observations
     of "water_fountain" are learnt by its regions layer and found by the recommender."""
     layer = roslaunch("igmm_layers", "igmm_layers.launch")  # the layer server's shipped defaults
     layer.wait_for_services(["/igmm_layers/locate_objects"], timeout=60)
-    start_region_search(roslaunch, rospy_node, files, labels_path="")
+    start_region_search(roslaunch, word2vec_server, labels_path="")
     publisher = rospy_node.Publisher("/igmm_layers/place_observations", ObjectObservation,
                                      queue_size=100)
     wait_until(lambda: publisher.get_num_connections() > 0, 30, what="layer server subscription")
@@ -174,97 +188,8 @@ def test_regions_layer_of_the_layer_server_is_searched_too(roslaunch, rospy_node
     assert (response.poses[0].position.x, response.poses[0].position.y) == pytest.approx((3.0, 4.0), abs=0.2)
 
 
-def test_the_default_sentence_backend_ranks_phrases_through_the_services(roslaunch, rospy_node,
-                                                                         files, building):
-    """Defaults of region_search.launch: the sentence model and the shipped phrase-level ranking
-    (the generated building's places found, best first, room numbers matched)."""
-    launch = roslaunch("region_search", "region_search.launch", labels_path=str(files / "labels.json"),
-                       layer_service="")
-    launch.wait_for_services(SERVICES, timeout=120)
-    wait_for_model(rospy_node, 300)
-    assert rospy_node.get_param("/embedding_server/active_backend") == "sentence"
-    recommend = rospy_node.ServiceProxy("/region_recommender/recommend", RecommendRegion)
-    for phrase, best in [("where can I get a drink of water", "water_fountain"),
-                         ("restroom", "bathroom"), ("take the lift", "elevator"),
-                         ("microscope", "bio_lab"), ("office 202", "office_202"),
-                         ("classroom 101", "classroom_101")]:
-        response = recommend(phrase=phrase, top_k=3)
-        assert response.success, response.message
-        assert response.labels[0] == best, (phrase, response)
-        assert list(response.scores) == sorted(response.scores, reverse=True), response
-        pose = response.poses[0]
-        assert (pose.position.x, pose.position.y) == pytest.approx(building.labels[best], abs=1e-3)
-        assert response.backend == "sentence" and response.backend_note == ""
-        assert "(sentence backend)" in response.message
-        assert response.matched and response.explanations[0].startswith("evidence: name ")
-    assert "number_match 1.00" in recommend(phrase="classroom 101", top_k=3).explanations[0]
-    typo = recommend(phrase="the printerz room", top_k=1)
-    assert typo.labels[0] == "printer_room" and list(typo.oov_words) == ["printerz"]
-    assert "word pieces 'printer' + '##z'" in typo.fallbacks[0]
-    empty = recommend(phrase=" ", top_k=1)
-    assert not empty.success and "has no words" in empty.message
-    # A place the building has no label for (it has no garage): never a confident answer; either
-    # "no labelled place matches" or the ranked places as a best guess, "not sure"
-    nothing = recommend(phrase="the parking garage", top_k=3)
-    assert nothing.success and nothing.confidence < 0.5, nothing
-    if nothing.matched:
-        assert nothing.message.startswith("not sure (confidence ") and len(nothing.labels) == 3
-    else:
-        assert list(nothing.labels) == [] and nothing.message.startswith(
-            "no labelled place matches 'the parking garage' (closest: ")
-    sure = recommend(phrase="take the lift", top_k=3)
-    assert sure.confidence > nothing.confidence and not sure.message.startswith("not sure")
-    embed = rospy_node.ServiceProxy("/embedding_server/embed", Embed)(
-        phrases=["water fountain", "drinking fountain", "elevator"])
-    assert embed.success and embed.dimension == 384 and embed.backend == "sentence"
-    vectors = np.array(embed.vectors).reshape(3, 384)
-    assert np.allclose(np.linalg.norm(vectors, axis=1), 1.0, atol=1e-4)
-    assert vectors[0] @ vectors[1] > vectors[0] @ vectors[2]
-    assert embed.model.startswith("sentence model all-MiniLM-L6-v2")
-    similarity = rospy_node.ServiceProxy("/embedding_server/similarity", PhraseSimilarity)
-    candidates = ["kitchen", "printer room", "water fountain", "elevator"]
-    scored = similarity(phrase="print a poster", candidates=candidates, method="")
-    assert scored.success and candidates[int(np.argmax(scored.scores))] == "printer room"
-
-
-def test_a_missing_sentence_model_falls_back_to_static_vectors_or_stops_with_a_clear_error(
-        roslaunch, rospy_node, files, tmp_path):
-    """~model_path names a folder without a model: with ~fallback (default) the server serves
-    the static phrase vectors and says so everywhere; without, a second server exits with the
-    reason."""
-    no_model = tmp_path / "no_model"
-    no_model.mkdir()
-    strict = roslaunch.node("region_search", "embedding_server", name="strict_embedding_server",
-                            params={"model_path": str(no_model), "fallback": False})
-    launch = start_region_search(roslaunch, rospy_node, files, backend="sentence", model_path=str(no_model),
-                                 labels_path=str(files / "labels.json"), layer_service="")
-    assert rospy_node.get_param("/embedding_server/active_backend") == "static"
-    embed = rospy_node.ServiceProxy("/embedding_server/embed", Embed)(phrases=["water fountain"])
-    assert embed.success and embed.backend == "static" and embed.dimension == 256
-    assert embed.backend_note == ("fallback to static: sentence model unavailable: "
-                                  f"{no_model} holds no sentence-transformers model "
-                                  "(no modules.json or config.json)")
-    assert embed.backend_note in embed.message
-    recommend = rospy_node.ServiceProxy("/region_recommender/recommend", RecommendRegion)
-    response = recommend(phrase="drinking fountain", top_k=1)
-    assert response.success and list(response.labels) == ["water_fountain"]
-    assert response.backend == "static" and response.backend_note == embed.backend_note
-    assert "(static backend)" in response.message
-    assert embed.backend_note in response.message
-    wait_until(lambda: "fallback to static: sentence model unavailable" in launch.log_tail(200),
-               30, what="the fallback warning in the embedding server's log")
-    # Without fallback: the node exits with the reason (roslaunch reports the death).
-    wait_until(lambda: "strict_embedding_server-1] process has died" in strict.log_tail(200), 60,
-               what="the strict embedding server to exit")
-    log = strict.log_tail(200)
-    assert (f"embedding_server: sentence model unavailable (fallback disabled): {no_model} holds "
-            "no sentence-transformers model") in log
-    assert "exit code 1" in log
-    assert not rospy_node.has_param("/strict_embedding_server/active_backend")
-
-
 def test_label_descriptions_from_the_label_file_and_a_descriptions_file(roslaunch, rospy_node,
-                                                                         files):
+                                                                         files, word2vec_server):
     """Names that say nothing ("place_a"); what each place is comes from its description: a
     label file's "description" field, and ~descriptions_path (its entries win), re-read when it
     changes."""
@@ -278,7 +203,7 @@ def test_label_descriptions_from_the_label_file_and_a_descriptions_file(roslaunc
     weights = files / "ranking_weights.yaml"
     weights.write_text("word2vec:\n  weights: {name: 3.0, expanded: 3.0, spelling: 1.0}\n"
                        "  description_offset: 0.0\n")
-    start_region_search(roslaunch, rospy_node, files, labels_path=str(labels),
+    start_region_search(roslaunch, word2vec_server, labels_path=str(labels),
                         descriptions_path=str(descriptions), layer_service="",
                         ranking_weights_path=str(weights))
     recommend = rospy_node.ServiceProxy("/region_recommender/recommend", RecommendRegion)

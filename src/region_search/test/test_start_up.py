@@ -12,13 +12,19 @@ recommender's own background probe would sometimes notice readiness first and hi
 here it runs only every 600 s (`~embedding_check_period`): the requests meet the moment of
 readiness themselves, every run. Backends: word2vec serving a small hand-made vector file
 (ready at once), and the default sentence model (seconds of loading).
+
+The sentence server started here is the default one (embedding_server.launch's defaults, as
+region_search.launch includes it; the recommender's parameters are the defaults that
+config/region_search.yaml holds): once it is ready, the same nodes are checked for the default
+backend's answers (a model load costs seconds, so it is loaded once for both). Last, a model
+folder without a model: the fallback to the static vectors, or a clear exit without fallback.
 """
 import threading
 
 import numpy as np
 import pytest
 
-from region_search.srv import RecommendRegion
+from region_search.srv import Embed, PhraseSimilarity, RecommendRegion
 from robot_sim.building import generate_building
 from ros_harness import wait_until
 
@@ -84,8 +90,9 @@ def write_vectors(path):
 @pytest.mark.parametrize("backend", ["word2vec", "sentence"])
 def test_every_answer_from_launch_through_readiness_is_a_result_or_not_ready(
         roslaunch, rospy_node, tmp_path, backend):
+    building = generate_building(0)
     labels = tmp_path / "labels.json"
-    labels.write_text(generate_building(0).labels_json())
+    labels.write_text(building.labels_json())
     asker = Asker(rospy_node)
     asker.start()
     try:
@@ -117,3 +124,101 @@ def test_every_answer_from_launch_through_readiness_is_a_result_or_not_ready(
         else:
             assert index < first_result, (phrase, response.message)  # answering from then on
             assert response.message.startswith(NOT_READY), (phrase, response.message)
+    if backend == "sentence":
+        check_the_default_sentence_backend(rospy_node, building)
+
+
+def check_the_default_sentence_backend(rospy_node, building):
+    """The sentence model and the shipped phrase-level ranking through the services (the
+    generated building's places found, best first, room numbers matched)."""
+    wait_until(lambda: rospy_node.has_param("/embedding_server/active_backend"), 60,
+               what="the embedding server's ~active_backend")
+    assert rospy_node.get_param("/embedding_server/active_backend") == "sentence"
+    recommend = rospy_node.ServiceProxy("/region_recommender/recommend", RecommendRegion)
+    for phrase, best in [("where can I get a drink of water", "water_fountain"),
+                         ("restroom", "bathroom"), ("take the lift", "elevator"),
+                         ("microscope", "bio_lab"), ("office 202", "office_202"),
+                         ("classroom 101", "classroom_101")]:
+        response = recommend(phrase=phrase, top_k=3)
+        assert response.success, response.message
+        assert response.labels[0] == best, (phrase, response)
+        assert list(response.scores) == sorted(response.scores, reverse=True), response
+        pose = response.poses[0]
+        assert (pose.position.x, pose.position.y) == pytest.approx(building.labels[best], abs=1e-3)
+        assert response.backend == "sentence" and response.backend_note == ""
+        assert "(sentence backend)" in response.message
+        assert response.matched and response.explanations[0].startswith("evidence: name ")
+    assert "number_match 1.00" in recommend(phrase="classroom 101", top_k=3).explanations[0]
+    typo = recommend(phrase="the printerz room", top_k=1)
+    assert typo.labels[0] == "printer_room" and list(typo.oov_words) == ["printerz"]
+    assert "word pieces 'printer' + '##z'" in typo.fallbacks[0]
+    empty = recommend(phrase=" ", top_k=1)
+    assert not empty.success and "has no words" in empty.message
+    # A place the building has no label for (it has no garage): never a confident answer; either
+    # "no labelled place matches" or the ranked places as a best guess, "not sure"
+    nothing = recommend(phrase="the parking garage", top_k=3)
+    assert nothing.success and nothing.confidence < 0.5, nothing
+    if nothing.matched:
+        assert nothing.message.startswith("not sure (confidence ") and len(nothing.labels) == 3
+    else:
+        assert list(nothing.labels) == [] and nothing.message.startswith(
+            "no labelled place matches 'the parking garage' (closest: ")
+    sure = recommend(phrase="take the lift", top_k=3)
+    assert sure.confidence > nothing.confidence and not sure.message.startswith("not sure")
+    embed = rospy_node.ServiceProxy("/embedding_server/embed", Embed)(
+        phrases=["water fountain", "drinking fountain", "elevator"])
+    assert embed.success and embed.dimension == 384 and embed.backend == "sentence"
+    vectors = np.array(embed.vectors).reshape(3, 384)
+    assert np.allclose(np.linalg.norm(vectors, axis=1), 1.0, atol=1e-4)
+    assert vectors[0] @ vectors[1] > vectors[0] @ vectors[2]
+    assert embed.model.startswith("sentence model all-MiniLM-L6-v2")
+    similarity = rospy_node.ServiceProxy("/embedding_server/similarity", PhraseSimilarity)
+    candidates = ["kitchen", "printer room", "water fountain", "elevator"]
+    scored = similarity(phrase="print a poster", candidates=candidates, method="")
+    assert scored.success and candidates[int(np.argmax(scored.scores))] == "printer room"
+
+
+def test_a_missing_sentence_model_falls_back_to_static_vectors_or_stops_with_a_clear_error(
+        roslaunch, rospy_node, tmp_path):
+    """~model_path names a folder without a model: with ~fallback (default) the server serves
+    the static phrase vectors and says so everywhere; without, a second server exits with the
+    reason. region_search.launch with its default backend (sentence); the recommender always
+    ranks here (~answer_no_match false: the subject is the fallback, not the no-match margin)."""
+    labels = tmp_path / "labels.json"
+    labels.write_text(generate_building(0).labels_json())
+    write_vectors(tmp_path / "vectors.txt")  # the word2vec settings of a second fallback
+    no_model = tmp_path / "no_model"
+    no_model.mkdir()
+    strict = roslaunch.node("region_search", "embedding_server", name="strict_embedding_server",
+                            params={"model_path": str(no_model), "fallback": False})
+    launch = roslaunch("region_search", "region_search.launch", model_path=str(no_model),
+                       source="pretrained", pretrained_path=str(tmp_path / "vectors.txt"),
+                       cache_dir=str(tmp_path / "cache"), remove_components=-1,
+                       answer_no_match="false", labels_path=str(labels), layer_service="")
+    launch.wait_for_services(["/embedding_server/embed", "/embedding_server/similarity", RECOMMEND],
+                             timeout=90)
+    wait_until(lambda: rospy_node.has_param("/embedding_server/active_backend"), 120,
+               interval=0.25, what="the embedding server's model to be ready (~active_backend set)")
+    assert rospy_node.get_param("/embedding_server/active_backend") == "static"
+    embed = rospy_node.ServiceProxy("/embedding_server/embed", Embed)(phrases=["water fountain"])
+    assert embed.success and embed.backend == "static" and embed.dimension == 256
+    assert embed.backend_note == ("fallback to static: sentence model unavailable: "
+                                  f"{no_model} holds no sentence-transformers model "
+                                  "(no modules.json or config.json)")
+    assert embed.backend_note in embed.message
+    recommend = rospy_node.ServiceProxy("/region_recommender/recommend", RecommendRegion)
+    response = recommend(phrase="drinking fountain", top_k=1)
+    assert response.success and list(response.labels) == ["water_fountain"]
+    assert response.backend == "static" and response.backend_note == embed.backend_note
+    assert "(static backend)" in response.message
+    assert embed.backend_note in response.message
+    wait_until(lambda: "fallback to static: sentence model unavailable" in launch.log_tail(200),
+               30, what="the fallback warning in the embedding server's log")
+    # Without fallback: the node exits with the reason (roslaunch reports the death).
+    wait_until(lambda: "strict_embedding_server-1] process has died" in strict.log_tail(200), 60,
+               what="the strict embedding server to exit")
+    log = strict.log_tail(200)
+    assert (f"embedding_server: sentence model unavailable (fallback disabled): {no_model} holds "
+            "no sentence-transformers model") in log
+    assert "exit code 1" in log
+    assert not rospy_node.has_param("/strict_embedding_server/active_backend")
