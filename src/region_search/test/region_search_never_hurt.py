@@ -1,5 +1,5 @@
 """The descriptions-never-hurt check of region search, shared by the tests of both backends
-(test_descriptions_never_hurt.py: the sentence backend; test_fresh_start.py: the word2vec backend,
+(test_embeddings_sentence.py: the sentence backend; test_fresh_start.py: the word2vec backend,
 on the model its server trained), imported through the test conftest's sys.path entry."""
 import json
 from pathlib import Path

@@ -15,7 +15,7 @@ The expected places are the labels the phrases name or mean (chosen by hand from
 names), not answers recorded from the code.
 
 The model trained here then serves the word2vec half of the descriptions-never-hurt check
-(test_descriptions_never_hurt.py holds the sentence half and says what is checked): the suite
+(test_embeddings_sentence.py holds the sentence half and says what is checked): the suite
 trains it once. Run alone, that test trains the same model itself.
 """
 import functools
