@@ -17,7 +17,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry
 from std_msgs.msg import String
 
-from ros_harness import PouchDBServer, wait_until
+from ros_harness import PouchDBServer, wait_for_subscriber, wait_until
 from ros_mongo import open_store
 from ros_mongo.fleet.changes import ChangesFollower
 from ros_mongo.urls import PASSWORD_ENV, USER_ENV, with_credentials
@@ -103,8 +103,8 @@ class Diagnostics:
         return "" if status is None else status.message + " " + " ".join(v.value for v in status.values)
 
 
-def _send(publisher, count):
-    wait_until(lambda: publisher.get_num_connections() > 0, LONG, what="recorder subscribed")
+def _send(publisher, count, recorder="/ros_mongo_server"):
+    wait_for_subscriber(publisher, recorder, LONG)
     for index in range(count):
         msg = Odometry()
         msg.header.frame_id = str(index)

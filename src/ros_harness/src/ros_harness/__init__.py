@@ -12,6 +12,7 @@ from ros_harness.processes import (
     free_port,
     http_get_json,
     master_graph,
+    wait_for_subscriber,
     wait_until,
 )
 
@@ -30,5 +31,6 @@ __all__ = [
     "free_port",
     "http_get_json",
     "master_graph",
+    "wait_for_subscriber",
     "wait_until",
 ]

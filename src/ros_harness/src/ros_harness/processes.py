@@ -83,6 +83,16 @@ def wait_until(condition: Callable[[], object], timeout: float, *, interval: flo
         interval = min(interval * 1.5, 0.5)
 
 
+def wait_for_subscriber(publisher, node: str, timeout: float) -> None:
+    """Wait until the rospy `publisher` is connected to the subscriber node `node` itself: other
+    subscribers of its topic (one an earlier test left in this process, on the session's
+    roscore) must not count, or messages go out before `node` listens."""
+    def connected() -> bool:
+        return any(getattr(link, "endpoint_id", None) == node
+                   for link in list(publisher.impl.connections))
+    wait_until(connected, timeout, what=f"{node} subscribed to {publisher.resolved_name}")
+
+
 def _let_children_hear_sigint() -> None:
     """A background job of a non-interactive shell starts with SIGINT ignored, and children
     inherit an ignored signal: every stop() would then wait its whole timeout before SIGKILL.
