@@ -69,6 +69,7 @@ def errands(roscore, rospy_node, tmp_path_factory, workspace_root):
     robot = Robot(client)
     wait_until(lambda: robot.odom is not None, 60, what="odometry from building_sim")
     yield robot
+    robot.close()       # the session's test node outlives this module: no subscriber left behind
     launches.stop_all()
 
 
@@ -78,12 +79,16 @@ class Robot:
     def __init__(self, client):
         self.client, self.odom, self.plan, self.track = client, None, None, []
         self.feedback = 0
-        rospy.Subscriber("/odom", Odometry, self.on_odom, queue_size=10)
-        rospy.Subscriber("/errand_server/plan", Path, self.on_plan, queue_size=5)
+        self.subscribers = [rospy.Subscriber("/odom", Odometry, self.on_odom, queue_size=10),
+                            rospy.Subscriber("/errand_server/plan", Path, self.on_plan, queue_size=5)]
         self.obstacles = rospy.Publisher("/building_sim/obstacles_in", PointStamped, queue_size=20,
                                          latch=False)
         self.clear = rospy.ServiceProxy("/building_sim/clear_obstacles", Trigger)
         self.teleport = rospy.Publisher("/initialpose", PoseWithCovarianceStamped, queue_size=2)
+
+    def close(self):
+        for topic in self.subscribers + [self.obstacles, self.teleport]:
+            topic.unregister()
 
     def put(self, xy):
         """Put the robot at `xy` (building_sim's initialpose), standing."""
