@@ -104,8 +104,7 @@ def drive(floor: Floor, sim: PeopleSimulator, points: np.ndarray, depart_hours: 
         t += DT
         if floor.clearance_at(pose[None])[0] < ROBOT_RADIUS:
             return DriveOutcome(False, collisions + 1, True, len(met), t)
-        if local.size and np.hypot(*(local - pose).T).min() < ROBOT_RADIUS + PERSON_RADIUS - 0.02:
-            collisions += 1
+        collisions += int(touching(pose, local))
     return DriveOutcome(False, collisions, False, len(met), t)
 
 
@@ -120,6 +119,12 @@ def step_aside(crowd: Crowd, pose: np.ndarray) -> None:
         direction = offset[inside] / np.maximum(gap[inside], 1e-6)[:, None]
         direction[gap[inside] < 1e-6] = (1.0, 0.0)
         crowd.xy[inside] = pose + direction * (ROBOT_RADIUS + PERSON_RADIUS + 0.06)
+
+
+def touching(pose, people: np.ndarray) -> bool:
+    """The robot at `pose` (x, y, ...) overlaps a person by more than 0.02 m."""
+    return bool(people.size and np.hypot(*(people - np.asarray(pose)[:2]).T).min()
+                < ROBOT_RADIUS + PERSON_RADIUS - 0.02)
 
 
 def time_limit(length: float) -> float:

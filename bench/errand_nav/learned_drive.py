@@ -29,7 +29,7 @@ from typing import Dict, List, Optional
 
 import numpy as np
 from crowd_drive import DT as FOLLOWER_DT
-from crowd_drive import ROBOT_RADIUS, Floor, make_way, step_aside
+from crowd_drive import ROBOT_RADIUS, Floor, make_way, step_aside, touching
 
 from lfd_controller.hallway import HALLWAY_SAFETY, HallwayController
 from lfd_controller.learning import controller_settings, load_reward
@@ -141,11 +141,6 @@ def start_state(points: np.ndarray) -> np.ndarray:
     heading = math.atan2(ahead[1] - points[0][1], ahead[0] - points[0][0])
     return np.array([points[0][0], points[0][1], heading, 0.0, 0.0])
 
-
-def touching(state, people: np.ndarray) -> bool:
-    """The robot at `state` overlaps a person by more than 0.02 m (crowd_drive's rule)."""
-    return bool(people.size and np.hypot(*(people - state[:2]).T).min()
-                < ROBOT_RADIUS + PERSON_RADIUS - 0.02)
 
 def summary(outcomes: List[LearnedOutcome]) -> Dict:
     """Stood-still and cycle figures over drives."""

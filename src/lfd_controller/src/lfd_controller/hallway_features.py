@@ -104,6 +104,14 @@ class HallwayTask:
         return things[first], motion[first]
 
 
+def near_people(points, people, radius: float) -> np.ndarray:
+    """Which of `points` (N, 2) lie within `radius` m of one of `people` (P >= 1, 2): the scan
+    returns that are a tracked person, not a wall."""
+    people = np.asarray(people, float).reshape(-1, 2)
+    return np.hypot(points[:, None, 0] - people[None, :, 0],
+                    points[:, None, 1] - people[None, :, 1]).min(axis=1) < radius
+
+
 def in_sight(pose, angles, ranges, *, margin: float = 0.3, people: Optional[np.ndarray] = None,
              person_radius: float = 0.35) -> Callable[[np.ndarray], bool]:
     """point -> True when the scan's nearest beam toward it reaches `margin` m past it. A beam
@@ -114,13 +122,11 @@ def in_sight(pose, angles, ranges, *, margin: float = 0.3, people: Optional[np.n
     x, y, yaw = (float(v) for v in pose[:3])
     angles, ranges = np.asarray(angles, float), np.asarray(ranges, float)
     if people is not None and len(people) and len(ranges):
-        people = np.asarray(people, float).reshape(-1, 2)
         with np.errstate(invalid="ignore"):
             ends = np.column_stack([x + ranges * np.cos(yaw + angles),
                                     y + ranges * np.sin(yaw + angles)])
-            gap = np.hypot(ends[:, None, 0] - people[None, :, 0],
-                           ends[:, None, 1] - people[None, :, 1]).min(axis=1)
-        ranges = np.where(np.isfinite(ranges) & (gap < person_radius), np.inf, ranges)
+            on_person = near_people(ends, people, person_radius)
+        ranges = np.where(np.isfinite(ranges) & on_person, np.inf, ranges)
 
     def visible(point) -> bool:
         if not len(angles):
@@ -145,8 +151,7 @@ def scan_points(pose, angles, ranges, *, sectors: int = 16, reach: float = 3.0,
     world = yaw + angles[ok]
     xy = np.column_stack([x + ranges[ok] * np.cos(world), y + ranges[ok] * np.sin(world)])
     if people is not None and len(people):
-        near = np.hypot(xy[:, None, 0] - people[None, :, 0],
-                        xy[:, None, 1] - people[None, :, 1]).min(axis=1) < person_radius
+        near = near_people(xy, people, person_radius)
         xy, world, kept = xy[~near], world[~near], ranges[ok][~near]
     else:
         kept = ranges[ok]
