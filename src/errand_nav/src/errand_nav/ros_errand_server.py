@@ -24,7 +24,7 @@ from errand_nav.ros_places import PlaceGoals
 from robot_common.gridplan import NoPathError
 from robot_common.maps import load_map, yaw_to_quaternion
 from robot_common.ros_maps import grid_to_msg, msg_to_grid
-from robot_common.ros_node import pose_2d, read_config
+from robot_common.ros_node import path_msg, pose_2d, read_config
 
 __all__ = ["ErrandServer", "start"]
 
@@ -189,17 +189,9 @@ class ErrandServer:
                  frame_pose: Tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Path:
         """The plan as a nav_msgs/Path in the map frame, or in `frame` where the map frame's
         pose is `frame_pose` (x, y, yaw)."""
-        msg = Path()
-        msg.header.frame_id = frame or self.config.map_frame
-        msg.header.stamp = rospy.Time.from_sec(float(planned.times[0]))
-        points = _moved(frame_pose, planned.points)
-        for i, ((x, y), when) in enumerate(zip(points, planned.times)):
-            ahead = points[min(i + 1, len(points) - 1)] - points[max(i - 1, 0)]
-            pose = PoseStamped()
-            pose.header.frame_id, pose.header.stamp = msg.header.frame_id, rospy.Time.from_sec(when)
-            _set_pose(pose.pose, x, y, math.atan2(ahead[1], ahead[0]))
-            msg.poses.append(pose)
-        return msg
+        return path_msg(_moved(frame_pose, planned.points), frame or self.config.map_frame,
+                        rospy.Time.from_sec(float(planned.times[0])), headings="along",
+                        stamps=[rospy.Time.from_sec(when) for when in planned.times])
 
     def publish_plan(self, planned: PlannedPath) -> None:
         """The plan on ~plan (map frame) and, for the controller, on `path` (controller_frame)."""

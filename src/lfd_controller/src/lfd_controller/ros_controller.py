@@ -18,8 +18,7 @@ from lfd_controller.params import RewardControllerParams
 from lfd_controller.planner import CollisionBarrier, RecedingHorizonController
 from lfd_controller.ros_hallway_controller import HallwayControllerNode
 from robot_common.errors import ModelError, TaskError
-from robot_common.maps import yaw_to_quaternion
-from robot_common.ros_node import odom_state, read_config
+from robot_common.ros_node import odom_state, path_msg, read_config
 from robot_common.tasks import scenario_from_yaml
 from robot_common.unicycle import Unicycle
 
@@ -163,16 +162,9 @@ class RewardControllerNode:
             self.publish_plan(state)
 
     def publish_plan(self, state):
-        path = Path()
-        path.header.stamp, path.header.frame_id = rospy.Time.now(), self.frame
-        for x, y, yaw, _, _ in self.controller.planned_states(state):
-            pose = PoseStamped()
-            pose.header = path.header
-            pose.pose.position.x, pose.pose.position.y = x, y
-            q = pose.pose.orientation
-            q.x, q.y, q.z, q.w = yaw_to_quaternion(yaw)
-            path.poses.append(pose)
-        self.plan.publish(path)
+        planned = self.controller.planned_states(state)
+        self.plan.publish(path_msg(planned[:, :2], self.frame, rospy.Time.now(),
+                                   headings=planned[:, 2]))
 
 
 def single_threaded_blas() -> None:

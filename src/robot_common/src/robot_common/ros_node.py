@@ -9,17 +9,22 @@ and the start-up / exit convention of every node executable.
 `ERROR: ...` line on stderr and exit status 1; otherwise the node spins until shutdown.
 """
 import logging
+import math
 import sys
-from typing import Callable, Iterable, Tuple, Type, TypeVar
+from typing import Callable, Iterable, Optional, Sequence, Tuple, Type, TypeVar, Union
 
+import numpy as np
 import rospy
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Path
 
 from robot_common.errors import ConfigError
-from robot_common.maps import quaternion_to_yaw
+from robot_common.maps import quaternion_to_yaw, yaw_to_quaternion
 from robot_common.params import NodeConfig
 from robot_common.paths import ros_home
 
-__all__ = ["route_logging", "read_config", "ros_home", "run_node", "odom_state", "pose_2d"]
+__all__ = ["route_logging", "read_config", "ros_home", "run_node", "odom_state", "pose_2d",
+           "path_msg"]
 
 ConfigT = TypeVar("ConfigT", bound=NodeConfig)
 
@@ -95,3 +100,61 @@ def pose_2d(transform) -> Tuple[float, float, float]:
     """(x, y, yaw) of a geometry_msgs/TransformStamped (a tf lookup), in the plane."""
     t, r = transform.transform.translation, transform.transform.rotation
     return t.x, t.y, quaternion_to_yaw(r.x, r.y, r.z, r.w)
+
+
+def path_msg(points, frame_id: str, stamp: Optional[rospy.Time] = None, *,
+             headings: Union[None, str, Sequence[float]] = None,
+             stamps: Optional[Sequence[rospy.Time]] = None) -> Path:
+    """A nav_msgs/Path through `points` ((x, y) each; none gives a Path without poses).
+
+    Args:
+        points: (N, 2) positions in `frame_id`.
+        frame_id: the frame of the path and of every pose.
+        stamp: the path's stamp (None: zero, "unstamped").
+        headings: each pose's yaw: None for none (the identity rotation), "along" for the
+            direction from the point before to the point after (at the ends: to the next / from
+            the one before; a lone point: yaw 0), or N yaws (rad).
+        stamps: each pose's stamp (N of them); None: the path's stamp.
+
+    Raises:
+        ValueError: `points` is not (N, 2), or `headings` / `stamps` do not give N values.
+    """
+    xy = np.asarray(points, dtype=float)
+    if xy.size == 0:
+        xy = xy.reshape(0, 2)
+    if xy.ndim != 2 or xy.shape[1] != 2:
+        raise ValueError(f"path points must be (N, 2) (x, y) pairs, got shape {xy.shape}")
+    yaws = _path_headings(xy, headings)
+    if stamps is not None and len(stamps) != len(xy):
+        raise ValueError(f"{len(stamps)} pose stamps for {len(xy)} path points")
+    msg = Path()
+    msg.header.frame_id = frame_id
+    msg.header.stamp = rospy.Time() if stamp is None else stamp
+    for i, (x, y) in enumerate(xy):
+        pose = PoseStamped()
+        pose.header.frame_id = frame_id
+        pose.header.stamp = msg.header.stamp if stamps is None else stamps[i]
+        pose.pose.position.x, pose.pose.position.y = float(x), float(y)
+        q = pose.pose.orientation
+        if yaws is None:
+            q.w = 1.0
+        else:
+            q.x, q.y, q.z, q.w = yaw_to_quaternion(yaws[i])
+        msg.poses.append(pose)
+    return msg
+
+
+def _path_headings(xy: np.ndarray, headings) -> Optional[Sequence[float]]:
+    """The yaws `path_msg`'s `headings` asks for (None: no rotation)."""
+    if headings is None:
+        return None
+    if isinstance(headings, str):
+        if headings != "along":
+            raise ValueError(f"headings must be None, 'along' or one yaw per point, got {headings!r}")
+        last = len(xy) - 1
+        ahead = [xy[min(i + 1, last)] - xy[max(i - 1, 0)] for i in range(len(xy))]
+        return [math.atan2(dy, dx) for dx, dy in ahead]
+    yaws = [float(yaw) for yaw in headings]
+    if len(yaws) != len(xy):
+        raise ValueError(f"{len(yaws)} headings for {len(xy)} path points")
+    return yaws

@@ -14,13 +14,13 @@ from types import SimpleNamespace
 
 import numpy as np
 import rospy
-from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry, Path
 from sensor_msgs.msg import Joy, LaserScan, TimeReference
 from std_msgs.msg import Bool, String
 
 from robot_common.msg import People
-from robot_common.ros_node import odom_state
+from robot_common.ros_node import odom_state, path_msg
 from robot_demo import waits
 
 TITLE = ("Learning from demonstration in a building: a person's joystick drives among people -> "
@@ -110,17 +110,6 @@ def press(joy, button):
     buttons[button] = 1
     joy.publish(Joy(axes=[0.0] * 8, buttons=buttons))
     joy.publish(Joy(axes=[0.0] * 8, buttons=[0] * 11))
-
-
-def path_msg(points) -> Path:
-    path = Path()
-    path.header.frame_id = FRAMES["odom_frame"]
-    for x, y in points:
-        pose = PoseStamped()
-        pose.header.frame_id = path.header.frame_id
-        pose.pose.position.x, pose.pose.position.y, pose.pose.orientation.w = x, y, 1.0
-        path.poses.append(pose)
-    return path
 
 
 def put_at_start(watch, initialpose) -> None:
@@ -237,7 +226,7 @@ def drive_learned(demo, scene, reward_file):
     path = rospy.Publisher(NS + "/path", Path, queue_size=1, latch=True)
     limit = int(scene.max_time / DT)
     watch.restart()
-    path.publish(path_msg(scene.path))
+    path.publish(path_msg(scene.path, FRAMES["odom_frame"]))
     waits.wait_until(lambda: watch.arrived is not None or watch.collided or watch.steps > limit,
                      limit * DT * 3, "the learned controller at the goal (or a collision)")
     figures = result(watch)
@@ -311,7 +300,7 @@ def record(demo, scene, bag_dir, session):
     initialpose = rospy.Publisher(NS + "/initialpose", PoseWithCovarianceStamped, queue_size=1)
     latched = [rospy.Publisher(NS + "/path", Path, queue_size=1, latch=True),
                rospy.Publisher(NS + "/scenario", String, queue_size=1, latch=True)]
-    latched[0].publish(path_msg(scene.path))
+    latched[0].publish(path_msg(scene.path, FRAMES["odom_frame"]))
     latched[1].publish(String(data=hallway_scenario(DT, "building").to_yaml()))
     clock = rospy.Publisher(NS + "/sim_time", TimeReference, queue_size=50)
     watch = Watch(scene_gap(demo), clock)
