@@ -83,7 +83,7 @@ class LearnedDriver:
         points = np.asarray(points, float)
         state, model = start_state(points), Unicycle(STEP)
         controller = HallwayController(self.reward, points, model, budget=self.budget,
-                                       safety=dict(self.safety))
+                                       safety=dict(self.safety), grid=grid)
         scene = HallwayScene(grid, points, state.copy(), [])
         crowd = Crowd(sim, radius=PERSON_RADIUS, seed=seed)
         met, waited = set(), 0.0

@@ -6,7 +6,9 @@ people, plans with the reward plus a fixed barrier around every scan point and p
 (`HallwayBarrier`: the demonstrations never show what touching costs) and returns the first
 command - or, when moving on would bring the scan inside its safety margin, a zero speed
 (turning in place: a round robot touches nothing that way), saying why
-(`status_`); a robot held up longer than `blocked_after` seconds reports the path blocked and
+(`status_`). A robot held up (without 0.3 m of progress along the path) for `replan_after`
+seconds follows a detour planned on the floor map and the scan (detour.plan_detour) round what
+the path's planner never saw; held up for `blocked_after` seconds it reports the path blocked and
 stays stopped. Learning (`fit_hallway_reward`) is CIOC over the same tasks, built from the
 demonstrations' own scans and tracked people at the start of each 4 s window, then an
 acceptance check with the controller in the loop (`hallway_acceptance`): refused only where
@@ -14,6 +16,7 @@ the controller fails where the person succeeded.
 """
 import math
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Sequence
 
@@ -22,6 +25,7 @@ from threadpoolctl import threadpool_limits
 
 from lfd_controller.cioc import LinearCIOC
 from lfd_controller.demos import Demonstration
+from lfd_controller.detour import plan_detour
 from lfd_controller.errors import LfdError
 from lfd_controller.hallway_features import (
     HALLWAY_SIGNS,
@@ -34,6 +38,7 @@ from lfd_controller.hallway_features import (
 from lfd_controller.laplace import DemoDynamics
 from lfd_controller.planner import RecedingHorizonController
 from lfd_controller.rewards import RewardDerivatives
+from robot_common.maps import GridMap
 from robot_common.tasks import ObstacleMotion, Scenario
 
 __all__ = ["HALLWAY_DRIVING", "HALLWAY_SAFETY", "room_margin", "TaskBuilder", "HallwayBarrier",
@@ -48,19 +53,27 @@ __all__ = ["HALLWAY_DRIVING", "HALLWAY_SAFETY", "room_margin", "TaskBuilder", "H
 # of something static, a detour past it: planner.RecedingHorizonController's unstall),
 # discount 0.97, a barrier 0.1 m beyond touching, a safety stop (zero speed; turning in place
 # allowed) when moving on would bring the scan within 0.05 m of the robot's edge, the path
-# reported blocked after 20 s held up, the local waypoint 4 m ahead on the path or the furthest
-# point up to there in the scan's sight, tracked people hiding nothing (further than a 4 s window
+# reported blocked after 20 s held up (without 0.3 m of progress), a detour after 4 s held up,
+# the local waypoint 4 m ahead on the path or as far up to there as the path stays in the scan's
+# sight, tracked people hiding nothing (further than a 4 s window
 # or the look-ahead travels: a waypoint passed inside a window turns its progress feature around);
 # on the last stretch, the goal in sight, the waypoint 4 m away through the goal (TaskBuilder).
 HALLWAY_DRIVING = {"horizon": 12, "plan_dt": 0.4, "terminal": 0.0, "spread_seeds": True,
                    "discount": 0.97, "max_iter": 12, "seed_turns": (0.0, 1.0, -1.0),
                    "detour": 0.9, "unstall": 2.0}
 HALLWAY_SAFETY = {"robot_radius": 0.18, "person_radius": 0.25, "barrier_margin": 0.1,
-                  "stop_margin": 0.05, "blocked_after": 20.0, "lookahead": 4.0}
+                  "stop_margin": 0.05, "blocked_after": 20.0, "lookahead": 4.0,
+                  "replan_after": 4.0}
 WINDOW, STRIDE = 40, 20
 # The safety stop looks this far (m) along the command beyond the stopping distance, and lets
 # through moves that bring a point inside its margin no more than this much (m) closer.
 STOP_LOOK, STOP_SLACK = 0.05, 0.01
+# Progress along the path (m) that counts as getting on (the detour and blocked clocks), and the
+# detour's room: the safety stop's reach plus this much (m).
+PROGRESS_STEP, DETOUR_ROOM = 0.3, 0.05
+# The scans a detour is planned on: one every SCAN_EVERY s over the last SCAN_MEMORY s (what the
+# robot saw on its way in: a cart hides what is behind it from where the robot stands).
+SCAN_EVERY, SCAN_MEMORY = 0.5, 10.0
 # Share of the cycle budget, counted from the cycle's start (the task from the scan and people
 # included), after which the planner starts nothing new; the rest is headroom for a busy machine
 # (on 2 shared cores a cycle can lose tens of ms to other processes).
@@ -170,6 +183,7 @@ class HallwayController:
     laser_offset: float = 0.0
     settings: Dict = field(default_factory=lambda: dict(HALLWAY_DRIVING))
     safety: Dict = field(default_factory=lambda: dict(HALLWAY_SAFETY))
+    grid: Optional[GridMap] = None
 
     def __post_init__(self):
         self.task = TaskBuilder(self.path, lookahead=self.safety["lookahead"],
@@ -181,11 +195,45 @@ class HallwayController:
         budget = None if self.budget is None else PLANNING_SHARE * self.budget
         self.planner = RecedingHorizonController(planned, self.model, budget=budget,
                                                  **self.settings)
-        self.status_, self.held_since_ = "following", None
+        self.status_ = "following"
+        self.detours_ = 0
+        self._left, self._getting_on, self._tried = math.inf, 0.0, 0.0
+        self._scans, self._scanned = deque(maxlen=int(SCAN_MEMORY / SCAN_EVERY)), -math.inf
 
     @property
     def goal(self) -> np.ndarray:
         return self.follower.path[-1]
+
+    @property
+    def path_(self) -> np.ndarray:
+        """The path followed now: the given one, or a detour and the rest of it."""
+        return self.follower.path
+
+    def _detour(self, state, t: float, angles, ranges) -> bool:
+        """Keep the progress clocks; after `replan_after` s without PROGRESS_STEP m of progress
+        (and as often again while none comes) follow a detour (detour.plan_detour) through
+        what the scan has seen free. True when the path changed."""
+        laser = (state[0] + self.laser_offset * math.cos(state[2]),
+                 state[1] + self.laser_offset * math.sin(state[2]), state[2])
+        if t - self._scanned >= SCAN_EVERY:
+            self._scans.append((laser, np.asarray(angles, float), np.asarray(ranges, float)))
+            self._scanned = t
+        left = self.follower.length - self.follower.progress
+        if left < self._left - PROGRESS_STEP:
+            self._left, self._getting_on, self._tried = left, t, t
+        wait = self.safety.get("replan_after", 0.0)
+        if not wait or wait <= 0 or t - self._tried < wait:
+            return False
+        self._tried = t
+        path = plan_detour(self.follower, state[:2],
+                           list(self._scans)[:-1] + [(laser, angles, ranges)],
+                           clearance=self.safety["robot_radius"] + self.safety["stop_margin"]
+                           + DETOUR_ROOM, grid=self.grid)
+        if path is None:
+            return False
+        self.task.follower = self.follower = PathFollower(path, lookahead=self.follower.lookahead)
+        self._left, self.detours_ = self.follower.length, self.detours_ + 1
+        return True
 
     @property
     def cycle_times_(self) -> List[float]:
@@ -200,17 +248,19 @@ class HallwayController:
             return np.zeros(2)
         started = time.perf_counter()
         task = self.task(state, t, angles, ranges, people, velocities)
+        if self._detour(state, t, angles, ranges):
+            task = self.task(state, t, angles, ranges, people, velocities)
+        if t - self._getting_on >= self.safety["blocked_after"]:
+            self.status_ = (f"blocked: held up {t - self._getting_on:.0f} s at "
+                            f"{self.follower.progress:.1f} of {self.follower.length:.1f} m "
+                            f"({self.detours_} detours tried)")
+            return np.zeros(2)
         command = self.planner.act(state, t, task, started=started)
         reason = self._too_close(angles, ranges, state[3], command)
         moving = abs(state[3]) > 0.05 or abs(command[0]) > 0.05
         if reason is None and moving:
-            self.held_since_, self.status_ = None, "following"
+            self.status_ = "following"
             return command
-        self.held_since_ = t if self.held_since_ is None else self.held_since_
-        if t - self.held_since_ >= self.safety["blocked_after"]:
-            self.status_ = (f"blocked: held up {t - self.held_since_:.0f} s at "
-                            f"{self.follower.progress:.1f} of {self.follower.length:.1f} m")
-            return np.zeros(2)
         if reason is not None:      # no way on: it may still turn in place (round robot)
             self.status_ = f"stopped: {reason}"
             return np.array([0.0, float(command[1])])

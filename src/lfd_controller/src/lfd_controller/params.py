@@ -102,13 +102,17 @@ class RewardControllerParams(NodeConfig):
     frame: str = param("odom", "frame of the published plan")
     enabled: bool = param(True, "drive from the start (service ~enable switches)")
     lookahead: float = param(4.0, "path mode (a hallway reward): the local waypoint this far (m) "
-                                  "along the path, or the furthest point up to there in the "
-                                  "scan's sight")
+                                  "along the path, or as far up to there as the path stays in "
+                                  "the scan's sight")
     safety_margin: float = param(0.05, "path mode: zero command while the scan shows anything "
                                        "within this distance (m) of the robot's edge")
-    blocked_after: float = param(20.0, "path mode: held up this long (s), the path is reported "
-                                       "blocked (ERROR on /diagnostics) and the robot stays "
-                                       "stopped until a new path or goal")
+    blocked_after: float = param(20.0, "path mode: held up (no 0.3 m of progress along the "
+                                       "path) this long (s), the path is reported blocked (ERROR "
+                                       "on /diagnostics) and the robot stays stopped until a new "
+                                       "path or goal")
+    replan_after: float = param(4.0, "path mode: held up this long (s), follow a detour planned "
+                                     "on ~map and the scan round what blocks the path (again as "
+                                     "often while held up); 0: never")
     laser_offset: float = param(0.1, "path mode: the laser frame's distance ahead of the base (m)")
     person_radius: float = param(0.25, "path mode: radius of a tracked person (m)")
     barrier_margin: float = param(0.1, "path mode: fixed barrier this far (m) beyond touching a "
@@ -140,6 +144,8 @@ class RewardControllerParams(NodeConfig):
         for name in ("lookahead", "blocked_after", "barrier_margin", "person_radius"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"~{name} must be positive, got {getattr(self, name)!r}")
+        if self.replan_after < 0:
+            raise ConfigError(f"~replan_after must be >= 0 (0: never), got {self.replan_after!r}")
         if self.safety_margin < 0 or self.laser_offset < 0:
             raise ConfigError(f"~safety_margin and ~laser_offset must be >= 0, got "
                               f"{self.safety_margin!r}, {self.laser_offset!r}")
@@ -151,7 +157,8 @@ class RewardControllerParams(NodeConfig):
         """The path mode's safety settings (lfd_controller.hallway.HALLWAY_SAFETY's keys)."""
         return {"robot_radius": self.robot_radius, "person_radius": self.person_radius,
                 "barrier_margin": self.barrier_margin, "stop_margin": self.safety_margin,
-                "blocked_after": self.blocked_after, "lookahead": self.lookahead}
+                "blocked_after": self.blocked_after, "lookahead": self.lookahead,
+                "replan_after": self.replan_after}
 
     def limits(self) -> UnicycleLimits:
         """The robot's limits (ModelError when one is not positive)."""

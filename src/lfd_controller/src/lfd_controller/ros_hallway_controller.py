@@ -35,6 +35,7 @@ class HallwayControllerNode:
     Parameters: RewardControllerParams (config/reward_controller.yaml): ~rate (cycle budget
       1/rate), ~max_iter, the limits, ~robot_radius, ~goal_tolerance, ~frame, ~enabled and the
       path mode's ~lookahead (4.0 m), ~safety_margin (0.05 m), ~blocked_after (20 s),
+      ~replan_after (4 s: held up this long, a detour planned on the map and the scan),
       ~laser_offset (0.1 m), ~person_radius (0.25 m), ~barrier_margin (0.1 m).
     Topics in: odom (nav_msgs/Odometry, pose in the path's frame), path (nav_msgs/Path: the
       global plan, e.g. move_base's; followed from its first pose), goal (geometry_msgs/
@@ -45,7 +46,8 @@ class HallwayControllerNode:
       (diagnostic_msgs/DiagnosticArray, name "reward_controller: path"): OK following (progress,
       waypoint) / arrived, WARN stopped (zero speed, turning allowed: what the scan shows inside
       the margin on its way) or no path, ERROR
-      blocked (held up longer than ~blocked_after: the robot stays stopped until a new path).
+      blocked (held up - no 0.3 m of progress - longer than ~blocked_after, detours tried: the
+      robot stays stopped until a new path).
     Services: ~enable (std_srvs/SetBool).
     """
 
@@ -79,7 +81,7 @@ class HallwayControllerNode:
             self.controller = HallwayController(
                 self.reward, points, self.model, budget=1.0 / self.config.rate,
                 goal_tolerance=self.config.goal_tolerance, laser_offset=self.config.laser_offset,
-                settings=self.settings, safety=self.config.hallway_safety())
+                settings=self.settings, safety=self.config.hallway_safety(), grid=self.grid)
             self.source, self.status = source, "following"
         rospy.loginfo(f"reward_controller: following {source} ({len(points)} poses, "
                       f"{self.controller.follower.length:.1f} m)")
@@ -111,6 +113,8 @@ class HallwayControllerNode:
         grid = msg_to_grid(msg)
         with self.lock:
             self.grid = grid
+            if self.controller is not None:     # the detours of the path followed now use it
+                self.controller.grid = grid
 
     def on_odom(self, msg: Odometry) -> None:
         with self.lock:
@@ -164,7 +168,8 @@ class HallwayControllerNode:
             follower = controller.follower
             item.values = [KeyValue("following", self.source),
                            KeyValue("progress_m", f"{follower.progress:.2f}"),
-                           KeyValue("length_m", f"{follower.length:.2f}")]
+                           KeyValue("length_m", f"{follower.length:.2f}"),
+                           KeyValue("detours", str(controller.detours_))]
         array = DiagnosticArray(status=[item])
         array.header.stamp = rospy.Time.now()
         self.diagnostics.publish(array)

@@ -89,7 +89,8 @@ def drive_learner(scene: HallwayScene, reward, budget: Optional[float] = 0.1,
     `margin` m beyond touching, cycle `budget` s or None: unlimited) plus its cycle times and
     last status."""
     controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=budget,
-                                   safety=dict(HALLWAY_SAFETY, barrier_margin=margin))
+                                   safety=dict(HALLWAY_SAFETY, barrier_margin=margin),
+                                   grid=scene.grid)
     cycles: List[float] = []
 
     def policy(state, t, seen):

@@ -1,0 +1,88 @@
+"""Detours round what the path's planner never saw: planned on the floor map and the scan, kept
+clear of what the scan shows, rejoining the path beyond it; none through a blocked hall; and the
+controller, held up in a cup of clutter on its path, drives round it to the goal."""
+import math
+
+import numpy as np
+
+from lfd_controller.detour import plan_detour, scan_window
+from lfd_controller.hallway import HALLWAY_SAFETY, HallwayController
+from lfd_controller.hallway_features import HallwayFeatures, PathFollower
+from lfd_controller.rewards import LinearReward
+from robot_common.maps import FREE, OCCUPIED, GridMap
+from robot_common.unicycle import Unicycle
+from robot_sim.hallway import HallwayScene, drive
+
+ANGLES = np.linspace(-math.pi, math.pi, 72, endpoint=False)
+
+
+def hall(clutter, width=4.0, length=10.0):
+    """A hall `width` m wide (0.1 m cells), the path along its middle from x = 1 m, clutter
+    (x, y, radius) that the map does not have."""
+    cells = np.full((int(width * 10) + 2, int(length * 10) + 20), OCCUPIED, dtype=np.int8)
+    cells[1:-1, 1:-1] = FREE
+    middle = 0.1 + width / 2.0
+    xs = np.linspace(1.0, 1.0 + length, int(length * 10) + 1)
+    path = np.column_stack([xs, np.full(len(xs), middle)])
+    return HallwayScene(GridMap(cells, 0.1), path, np.array([1.0, middle, 0.0, 0.0, 0.0]), [],
+                        clutter=np.asarray(clutter, float).reshape(-1, 3))
+
+
+def cup(x=5.0, middle=2.1):
+    """Discs of 0.15 m in a cup open toward the robot, 1.2 m across, on the path at `x`."""
+    bottom = [(x, middle + dy, 0.15) for dy in np.arange(-0.6, 0.61, 0.2)]
+    sides = [(x - dx, middle + side, 0.15) for dx in (0.2, 0.4, 0.6) for side in (-0.6, 0.6)]
+    return bottom + sides
+
+
+def seen_from(scene, pose):
+    return (tuple(pose), ANGLES, scene.scan(np.asarray(pose, float), 0.0, ANGLES, 8.0))
+
+
+def test_a_detour_keeps_clear_of_what_the_scan_shows_and_rejoins_the_path_beyond_it():
+    scene = hall([(5.0, 2.1, 0.4)])
+    follower = PathFollower(scene.path, lookahead=4.0)
+    follower.update([4.0, 2.1])
+    path = plan_detour(follower, [4.0, 2.1], [seen_from(scene, (4.0, 2.1, 0.0))],
+                       clearance=0.28, grid=scene.grid)
+    assert path is not None
+    dense = np.vstack([np.linspace(a, b, 20) for a, b in zip(path[:-1], path[1:])])
+    assert np.hypot(*(dense - [5.0, 2.1]).T).min() >= 0.4 + 0.28 - 0.08   # a cell's slack
+    assert np.allclose(path[-1], scene.goal)
+    rejoined = dense[(np.abs(dense[:, 1] - 2.1) < 1e-6) & (dense[:, 0] > 4.05)]
+    assert rejoined[:, 0].min() > 5.4
+
+
+def test_no_detour_through_a_hall_blocked_from_wall_to_wall():
+    scene = hall([(5.0, y, 0.3) for y in np.arange(0.2, 4.1, 0.4)])
+    follower = PathFollower(scene.path, lookahead=4.0)
+    follower.update([4.0, 2.1])
+    seen = [seen_from(scene, (4.0, 2.1, 0.0))]
+    assert plan_detour(follower, [4.0, 2.1], seen, clearance=0.28, grid=scene.grid) is None
+    assert plan_detour(follower, [4.0, 2.1], seen, clearance=0.28) is None
+
+
+def test_without_a_map_only_what_the_scan_has_seen_free_is_free():
+    scene = hall([(5.0, 2.1, 0.4)])
+    window = scan_window([seen_from(scene, (4.0, 2.1, 0.0))], centre=(4.0, 2.1), half_width=3.0)
+    behind, beside, walls = (5.8, 2.1), (5.0, 3.2), (4.0, 4.3)
+    assert window.is_free(*np.transpose([beside])).all()
+    assert not window.is_free(*np.transpose([behind, walls])).any()
+
+
+def test_the_controller_held_up_in_a_cup_of_clutter_drives_round_it_to_the_goal():
+    features = HallwayFeatures()
+    weights = dict.fromkeys(features.names, 0.0)
+    weights.update(path_progress=10.0, speed_squared=-10.0, turn_squared=-1.0, speed_effort=-1.0,
+                   turn_effort=-1.0, wall_proximity=-1.0)
+    scene = hall(cup(), length=8.0)
+    controller = HallwayController(LinearReward([weights[n] for n in features.names], features),
+                                   scene.path, Unicycle(0.1), budget=None, grid=scene.grid,
+                                   safety=dict(HALLWAY_SAFETY))
+
+    def policy(state, t, seen):
+        return controller.act(state, t, seen.angles, seen.ranges, seen.people, seen.velocities)
+    result = drive(scene, policy, max_time=150.0)
+    assert result.collision is None
+    assert result.reached, controller.status_
+    assert controller.detours_ >= 1
