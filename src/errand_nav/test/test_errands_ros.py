@@ -22,7 +22,7 @@ from nav_msgs.srv import GetPlan
 from std_srvs.srv import Trigger
 
 from robot_common.maps import FREE, OCCUPIED, GridMap, save_map
-from ros_harness import LaunchSet, wait_until
+from ros_harness import LaunchSet, wait_for_subscriber, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -31,6 +31,7 @@ pytestmark = pytest.mark.ros
 START, SOUTH_EAST, NORTH_EAST = (1.0, 0.75), (7.0, 0.75), (7.0, 4.25)
 ROOM = (4.0, 2.5)
 DRIVE_TIMEOUT = 240.0
+SIM = "/building_sim"        # the simulator node of launch/errands_sim.launch
 
 
 def floor() -> GridMap:
@@ -92,8 +93,7 @@ class Robot:
 
     def put(self, xy):
         """Put the robot at `xy` (building_sim's initialpose), standing."""
-        wait_until(lambda: self.teleport.get_num_connections() > 0, 60,
-                   what="building_sim subscribed to initialpose")
+        wait_for_subscriber(self.teleport, SIM, 60)
         pose = PoseWithCovarianceStamped()
         pose.header.frame_id, pose.header.stamp = "map", rospy.Time.now()
         pose.pose.pose.position.x, pose.pose.pose.position.y = xy
@@ -131,8 +131,7 @@ class Robot:
         return self.client.get_state(), self.client.get_goal_status_text()
 
     def block(self, x, ys):
-        wait_until(lambda: self.obstacles.get_num_connections() > 0, 60,
-                   what="building_sim subscribed to ~obstacles_in")
+        wait_for_subscriber(self.obstacles, SIM, 60)
         for y in ys:
             point = PointStamped()
             point.header.frame_id, point.header.stamp = "map", rospy.Time.now()

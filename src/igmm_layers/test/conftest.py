@@ -9,7 +9,7 @@ import yaml
 
 from igmm_layers.srv import LayerInfo
 from robot_common.msg import ObjectObservation
-from ros_harness import RosLaunch, wait_until
+from ros_harness import RosLaunch, wait_for_subscriber, wait_until
 
 CONFIG = Path(__file__).resolve().parent.parent / "config" / "igmm_layers.yaml"
 SERVICES = ["lookup_object", "pair_likelihood", "alternate_object", "locate_objects", "count_objects",
@@ -68,7 +68,7 @@ def observe(rospy_node):
         if topic not in publishers:
             publishers[topic] = rospy_node.Publisher(topic, ObjectObservation, queue_size=20000)
         publisher = publishers[topic]
-        wait_until(lambda: publisher.get_num_connections() > 0, 90, what=f"{server} on {topic}")
+        wait_for_subscriber(publisher, f"/{server}", 90)
         for msg in messages:
             publisher.publish(msg)
         target = before + (len(messages) if expect_received is None else expect_received)

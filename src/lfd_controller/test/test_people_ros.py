@@ -22,7 +22,7 @@ from lfd_controller.sim import PERSON_MAPPING, Person, SimulatedPerson, make_per
 from robot_common.ros_node import odom_state
 from robot_common.tasks import scenario_from_yaml
 from robot_sim.scenarios import run_episode
-from ros_harness import wait_until
+from ros_harness import wait_for_subscriber, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -107,7 +107,7 @@ def test_person_like_joystick_demos_recorded_through_ros_are_learnable(rospy_nod
     wait_until(lambda: scenario_msgs, 60, what="the simulator's latched scenario")
     scenario = scenario_from_yaml(scenario_msgs[-1].data)
     person = JoystickPerson(make_person("potential", 5, person=DEMONSTRATOR), scenario)
-    wait_until(lambda: person.joy.get_num_connections() > 0, 60, what="joy_teleop to connect")
+    wait_for_subscriber(person.joy, f"{NS}/joy_teleop", 60)
     reset = rospy.ServiceProxy(f"{NS}/unicycle_sim/reset", Trigger)
     start, stop = (rospy.ServiceProxy(f"{NS}/demo_recorder/{name}", Trigger) for name in ("start", "stop"))
 

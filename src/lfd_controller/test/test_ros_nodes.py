@@ -11,7 +11,7 @@ from sensor_msgs.msg import Joy
 from std_msgs.msg import Bool, String
 from std_srvs.srv import Trigger
 
-from ros_harness import wait_until
+from ros_harness import wait_for_subscriber, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -72,7 +72,7 @@ def test_teleop_needs_the_dead_man_button_and_scales_axes(rospy_node, roslaunch)
     out = Collector("/teleop_test/cmd_vel", Twist)
     joy = rospy.Publisher("/teleop_test/joy", Joy, queue_size=10)
     node.wait_for_topics(["/teleop_test/cmd_vel"])
-    wait_until(lambda: joy.get_num_connections() > 0, 60, what="joy_teleop to connect")
+    wait_for_subscriber(joy, "/joy_teleop", 60)
     idle, held = [0] * 11, [0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0]
     axes = [0.4, 0.8, 0, 0, 0, 0, 0, 0]
     joy.publish(_joy(axes, idle))             # stick pushed, LB not held: nothing
@@ -103,7 +103,7 @@ def test_recording_by_joystick_buttons_stores_the_demo_in_a_bag_and_the_database
     recording = Collector("/demo_recorder/recording", Bool)
     demos = Collector("/demo_recorder/demonstrations", rospy.AnyMsg)
     joy = rospy.Publisher("/joy", Joy, queue_size=10)
-    wait_until(lambda: joy.get_num_connections() > 0, 60, what="joy_teleop to connect")
+    wait_for_subscriber(joy, "/joy_teleop", 60)
     lb, press_a, press_b = [0, 0, 0, 0, 1] + [0] * 6, [1] + [0] * 10, [0, 1] + [0] * 9
     idle = [0] * 11
 
@@ -157,7 +157,7 @@ def test_robot_mode_pairs_odometry_with_the_latest_cmd_vel(rospy_node, roslaunch
     demos = Collector("/demo_recorder/demonstrations", rospy.AnyMsg)
     odom = Collector("/odom", Odometry)
     joy = rospy.Publisher("/joy", Joy, queue_size=10)
-    wait_until(lambda: joy.get_num_connections() > 0, 60, what="joy_teleop to connect")
+    wait_for_subscriber(joy, "/joy_teleop", 60)
     start, stop = rospy.ServiceProxy("/demo_recorder/start", Trigger), \
         rospy.ServiceProxy("/demo_recorder/stop", Trigger)
     # the latched scenario reaches the recorder some time after its services are up (a busy

@@ -18,7 +18,7 @@ from std_msgs.msg import Header
 from region_search.srv import Embed, PhraseSimilarity, RecommendRegion
 from robot_common.msg import ObjectObservation
 from robot_sim.building import generate_building
-from ros_harness import LaunchSet, wait_until
+from ros_harness import LaunchSet, wait_for_subscriber, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -169,7 +169,7 @@ def test_regions_layer_of_the_layer_server_is_searched_too(roslaunch, rospy_node
     start_region_search(roslaunch, word2vec_server, labels_path="")
     publisher = rospy_node.Publisher("/igmm_layers/place_observations", ObjectObservation,
                                      queue_size=100)
-    wait_until(lambda: publisher.get_num_connections() > 0, 30, what="layer server subscription")
+    wait_for_subscriber(publisher, "/igmm_layers", 60)
     rng = np.random.default_rng(1)
     for _ in range(12):
         x, y = 3.0 + 0.05 * rng.standard_normal(), 4.0 + 0.05 * rng.standard_normal()

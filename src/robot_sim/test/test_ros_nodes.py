@@ -56,7 +56,7 @@ def test_building_sim_drives_on_cmd_vel_sees_an_added_obstacle_and_reports_the_c
     from std_msgs.msg import String
     from std_srvs.srv import Trigger
 
-    from ros_harness import wait_until
+    from ros_harness import wait_for_subscriber, wait_until
 
     sim = roslaunch("robot_sim", "building_sim.launch", people=0, start="[3.0, 6.7, 0.0]",
                     time_scale=2.0, with_map=False)
@@ -80,8 +80,8 @@ def test_building_sim_drives_on_cmd_vel_sees_an_added_obstacle_and_reports_the_c
     cmd = rospy_node.Publisher("/cmd_vel", Twist, queue_size=5)
     pose = rospy_node.Publisher("/initialpose", PoseWithCovarianceStamped, queue_size=1)
     try:
-        wait_until(lambda: all(p.get_num_connections() > 0 for p in (obstacles, cmd, pose)), 60,
-                   what="building_sim to connect")
+        for publisher in (obstacles, cmd, pose):
+            wait_for_subscriber(publisher, "/building_sim", 60)
 
         def ahead():
             """The laser's range straight ahead (the two middle beams of 360 over 270 degrees)."""

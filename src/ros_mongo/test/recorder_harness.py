@@ -8,7 +8,7 @@ import rospy
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
 
-from ros_harness import wait_until
+from ros_harness import wait_for_subscriber
 from ros_mongo import open_store
 
 RECORDER_STATUS = "ros_mongo_server: recorder"
@@ -45,8 +45,9 @@ class Sender:
         self.rate, self.sent, self._stop = rate, 0, threading.Event()
         self._thread = None
 
-    def connected(self, timeout=60):
-        wait_until(lambda: self.publisher.get_num_connections() > 0, timeout, what="recorder subscribed")
+    def connected(self, recorder, timeout=60):
+        """Wait until the node `recorder` (its resolved name) has subscribed."""
+        wait_for_subscriber(self.publisher, recorder, timeout)
         return self
 
     def send(self, count):

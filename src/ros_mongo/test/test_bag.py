@@ -14,7 +14,7 @@ from ros_mongo_samples import custom_message
 from sensor_msgs.msg import Image, JointState, LaserScan
 from std_msgs.msg import Header
 
-from ros_harness import wait_until
+from ros_harness import wait_for_subscriber, wait_until
 from ros_mongo import BagError, cli, open_store, parse_query
 from ros_mongo.cli import parse_args, run
 from ros_mongo.files.bagio import export_bag, import_bag, iter_bag
@@ -194,12 +194,14 @@ def test_a_bag_left_by_a_killed_rosbag_record_is_recovered(rospy_node, couchdb_u
     from std_msgs.msg import String
 
     topic, size = f"/recorded_{uuid.uuid4().hex[:8]}", 3000
+    recorder = f"/crash_record_{uuid.uuid4().hex[:8]}"        # the node name rosbag record runs under
     active = tmp_path / "crash.bag.active"
     publisher = rospy_node.Publisher(topic, String, queue_size=100)
-    record = subprocess.Popen(["rosbag", "record", "--chunksize=1", "-O", str(tmp_path / "crash.bag"), topic],
+    record = subprocess.Popen(["rosbag", "record", "--chunksize=1", "-O", str(tmp_path / "crash.bag"), topic,
+                               f"__name:={recorder[1:]}"],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
-        wait_until(lambda: publisher.get_num_connections() > 0, 90, what="rosbag record subscribed")
+        wait_for_subscriber(publisher, recorder, 90)
         sent = [f"message {i:03d} " + "x" * size for i in range(40)]
         for text in sent:
             publisher.publish(String(data=text))

@@ -22,7 +22,7 @@ from recorder_harness import Sender, start_recorder, stored_xs
 from ros_mongo_samples import serialized
 from std_msgs.msg import String
 
-from ros_harness import FaultProxy, wait_until
+from ros_harness import FaultProxy, wait_for_subscriber, wait_until
 from ros_mongo import TopicInfo, make_record, open_store
 from ros_mongo.errors import StoreError, StoreRefused
 from ros_mongo.files.bagio import export_bag
@@ -174,8 +174,8 @@ def test_recorder_keeps_every_message_through_a_fault_and_stores_each_once(
     _admin_creates(couchdb_server, name)
     if FAULTS[fault].get("member"):
         proxy.set(member=True)
-    recorder(roslaunch, proxy.database_url(name), tmp_path)
-    sender = Sender(rate=500.0).connected()
+    launch = recorder(roslaunch, proxy.database_url(name), tmp_path)
+    sender = Sender(rate=500.0).connected(launch.node_name)
     sender.send(100)
     wait_until(lambda: diagnostics.count("stored") == 100, 60, what="100 stored")
     proxy.set(**FAULTS[fault])
@@ -205,7 +205,7 @@ def test_rotated_password_then_fixed_by_the_operator_with_a_credentials_file(
     credentials.write_text(f"robot:{secret}\n")
     proxy.set(require_auth=f"robot:{secret}")
     launch = recorder(roslaunch, proxy.database_url(name), tmp_path, db_credentials_file=str(credentials))
-    sender = Sender(rate=500.0).connected()
+    sender = Sender(rate=500.0).connected(launch.node_name)
     sender.send(100)
     wait_until(lambda: diagnostics.count("stored") == 100, 60, what="100 stored")
     proxy.set(require_auth="robot:rotated-by-someone")     # the server's password changed
@@ -227,8 +227,8 @@ def test_spool_survives_an_auth_error_during_the_drain(couchdb_server, proxy, ro
                                                        diagnostics):
     name = _names()
     url = proxy.database_url(name)
-    recorder(roslaunch, url, tmp_path)
-    sender = Sender(rate=500.0).connected()
+    launch = recorder(roslaunch, url, tmp_path)
+    sender = Sender(rate=500.0).connected(launch.node_name)
     sender.send(100)
     wait_until(lambda: diagnostics.count("stored") == 100, 60, what="100 stored")
     proxy.set(timeout="writes")
@@ -281,11 +281,11 @@ def size_limit(request, tmp_path):
 def test_oversized_document_is_split_out_and_only_it_is_quarantined(size_limit, roslaunch, tmp_path,
                                                                     diagnostics):
     quarantine = tmp_path / "refused.quarantine"
-    recorder(roslaunch, size_limit.url, tmp_path, topics=["/odom", "/notes"],
-             batch_period=3.0, quarantine_path=str(quarantine))
+    launch = recorder(roslaunch, size_limit.url, tmp_path, topics=["/odom", "/notes"],
+                      batch_period=3.0, quarantine_path=str(quarantine))
     notes = rospy.Publisher("/notes", String, queue_size=100)
-    wait_until(lambda: notes.get_num_connections() > 0, 60, what="/notes subscribed")
-    sender = Sender(rate=500.0).connected()
+    wait_for_subscriber(notes, launch.node_name, 60)
+    sender = Sender(rate=500.0).connected(launch.node_name)
     big = String(data="x" * 60000)                    # over the limit of 20,000 bytes
     sender.send(40)
     notes.publish(String(data="small"))
@@ -314,8 +314,8 @@ def test_oversized_document_is_split_out_and_only_it_is_quarantined(size_limit, 
 def test_writer_failure_is_reported_and_the_writer_restarted(couchdb_server, proxy, roslaunch, tmp_path,
                                                              diagnostics):
     name = _names()
-    recorder(roslaunch, proxy.database_url(name), tmp_path)
-    sender = Sender(rate=500.0).connected()
+    launch = recorder(roslaunch, proxy.database_url(name), tmp_path)
+    sender = Sender(rate=500.0).connected(launch.node_name)
     sender.send(50)
     wait_until(lambda: diagnostics.count("stored") == 50, 60, what="50 stored")
     proxy.set(bulk_answer="[null]")                   # a 201 whose body has an unexpected shape

@@ -21,7 +21,7 @@ from ros_mongo_samples import serialized
 from sensor_msgs.msg import Image
 from std_srvs.srv import Trigger
 
-from ros_harness import LaunchSet, PouchDBServer, RosCore, wait_until
+from ros_harness import LaunchSet, PouchDBServer, RosCore, wait_for_subscriber, wait_until
 from ros_mongo import TopicInfo, make_record, open_store
 from ros_mongo.fleet.replication import (
     POUCHDB_BATCH_SIZE,
@@ -320,7 +320,7 @@ def test_replicator_reports_lag_and_obeys_start_stop_trigger(roslaunch, rospy_no
                                   "/ros_mongo_replicator/trigger"], timeout=LONG)
         wait_until(lambda: status.get("state") == "running", LONG, what="replication running")
         publisher = rospy.Publisher("/odom", Odometry, queue_size=1000)
-        wait_until(lambda: publisher.get_num_connections() > 0, LONG, what="recorder subscribed")
+        wait_for_subscriber(publisher, "/ros_mongo_server", LONG)
 
         def send(first, count):
             for index in range(first, first + count):

@@ -18,7 +18,7 @@ from fleet_helpers import FleetRobot, all_docs, content, messages
 from ros_mongo_samples import serialized
 from std_msgs.msg import String
 
-from ros_harness import FaultProxy, LaunchSet, PouchDBServer, RosCore, wait_until
+from ros_harness import FaultProxy, LaunchSet, PouchDBServer, RosCore, wait_for_subscriber, wait_until
 from ros_mongo import TopicInfo, make_record, open_store
 from ros_mongo.fleet.changes import ChangesFollower
 from ros_mongo.records import split_time
@@ -230,8 +230,8 @@ def test_a_full_spool_loses_only_the_oldest_images_and_counts_each(roslaunch, di
     odom_pub = rospy.Publisher("/odom", Odometry, queue_size=1000)
     image_pub = rospy.Publisher("/camera/rgb/image_raw", Image, queue_size=100)
     launch.wait_for_subscribers(["/odom", "/camera/rgb/image_raw"], timeout=LONG)
-    wait_until(lambda: odom_pub.get_num_connections() > 0 and image_pub.get_num_connections() > 0, LONG,
-               what="recorder connected")
+    for publisher in (odom_pub, image_pub):
+        wait_for_subscriber(publisher, "/ros_mongo_server", LONG)
     pixels = bytes(i % 251 for i in range(640 * 480))
     for index in range(count):
         odom = Odometry()

@@ -15,7 +15,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Image, JointState, LaserScan
 from std_srvs.srv import Trigger
 
-from ros_harness import wait_until
+from ros_harness import wait_for_subscriber, wait_until
 from ros_mongo import TopicInfo, make_record, open_store
 from ros_mongo.records import split_time
 from ros_mongo.srv import Count, Start
@@ -39,7 +39,7 @@ def test_recorder_stores_all_types_new_topics_and_original_tags(roslaunch, db_ur
     publishers = {t: rospy.Publisher(t, kinds[t], queue_size=10) for t in sent}  # /extra appears later
     launch.wait_for_subscribers(list(sent))
     for topic, publisher in publishers.items():
-        wait_until(lambda p=publisher: p.get_num_connections() > 0, 60, what=f"{topic} connected")
+        wait_for_subscriber(publisher, launch.node_name, 60)
         for _ in range(3):
             publisher.publish(sent[topic])
     wait_until(lambda: diagnostics.count("stored") == 15, 90, what="15 stored messages")
@@ -62,8 +62,8 @@ def test_recorder_stores_all_types_new_topics_and_original_tags(roslaunch, db_ur
 def test_database_outage_mid_stream_stores_each_message_once(roslaunch, own_db_server, tmp_path,
                                                              diagnostics):
     url = own_db_server.database_url("robot_data")
-    recorder(roslaunch, url, tmp_path)
-    sender = Sender(rate=200.0).connected().start(800)  # 4 s of messages
+    launch = recorder(roslaunch, url, tmp_path)
+    sender = Sender(rate=200.0).connected(launch.node_name).start(800)  # 4 s of messages
     wait_until(lambda: diagnostics.count("stored") >= 100, 60, what="first messages stored")
     own_db_server.stop()
     wait_until(lambda: diagnostics.count("spool_pending") >= 100, 60, what="messages spooled")
@@ -82,7 +82,7 @@ def test_database_outage_mid_stream_stores_each_message_once(roslaunch, own_db_s
 @pytest.mark.parametrize("db_server", ["pouchdb", "mongodb"], indirect=True)
 def test_sigkill_loses_only_unacknowledged_messages(roslaunch, db_url, tmp_path, diagnostics):
     launch = recorder(roslaunch, db_url, tmp_path, batch_period=0.2)
-    sender = Sender(rate=400.0).connected().start(4000)
+    sender = Sender(rate=400.0).connected(launch.node_name).start(4000)
     wait_until(lambda: diagnostics.count("stored") >= 200, 60, what="messages stored")
     acknowledged = diagnostics.count("stored") + diagnostics.count("spool_pending")
     os.kill(launch.node_pid(launch.node_name), signal.SIGKILL)
@@ -100,7 +100,7 @@ def test_sigkill_while_spooling_then_restart_drains_the_spool(roslaunch, own_cou
                                                               diagnostics):
     url = own_couchdb_server.database_url("robot_data")
     launch = recorder(roslaunch, url, tmp_path)
-    sender = Sender(rate=500.0).connected()
+    sender = Sender(rate=500.0).connected(launch.node_name)
     sender.send(100)
     wait_until(lambda: diagnostics.count("stored") == 100, 60, what="100 stored")
     own_couchdb_server.stop()
@@ -232,7 +232,7 @@ def test_original_launch_files_record_and_retrieve_with_a_two_word_query(roslaun
     roslaunch("ros_mongo", "ros_mongo_server.launch", db_url=couchdb_url, session_id="compat",
               spool_path=str(tmp_path / "spool"))
     publisher = rospy.Publisher("/scan", LaserScan, queue_size=10)
-    wait_until(lambda: publisher.get_num_connections() > 0, 60, what="recorder subscribed")
+    wait_for_subscriber(publisher, "/ros_mongo_server", 60)
     sent = scan()
     for _ in range(5):
         publisher.publish(sent)

@@ -11,7 +11,7 @@ from robot_common.msg import PeopleCount
 from robot_sim import generate_building
 from robot_sim.people import PeopleSimulator
 from robot_sim.ros_people import sim_stamp
-from ros_harness import wait_until
+from ros_harness import wait_for_subscriber, wait_until
 from traffic_gp.model import TrafficGP
 from traffic_gp.observations import Observations
 from traffic_gp.persistence import read_header
@@ -104,7 +104,7 @@ def test_learns_from_simulated_robots_and_serves_a_crowd_costmap(roslaunch, rosp
     bad = PeopleCount(robot_id="broken", cells=[Point(10.0, 6.5, 0)], seen_fraction=[1.0, 1.0],
                       counts=[1])
     publisher = rospy.Publisher("/people_counts", PeopleCount, queue_size=1)
-    wait_until(lambda: publisher.get_num_connections() > 0, 90, what="a subscriber")
+    wait_for_subscriber(publisher, NODE, 90)
     publisher.publish(bad)
     wait_until(lambda: "dropped a PeopleCount from 'broken'" in launch.log_tail(400), 300,
                what="the malformed message to be reported")
@@ -183,7 +183,7 @@ def test_a_saved_model_is_served_as_saved_without_training(roslaunch, rospy_node
     from geometry_msgs.msg import Point
 
     publisher = rospy.Publisher("/people_counts", PeopleCount, queue_size=10)
-    wait_until(lambda: publisher.get_num_connections() > 0, 90, what="a subscriber")
+    wait_for_subscriber(publisher, NODE, 90)
     seen = PeopleCount(robot_id="r1", cells=[Point(10.1, 6.6, 0), Point(10.6, 6.6, 0)],
                        seen_fraction=[1.0, 1.0], counts=[2, 0])
     seen.header.stamp = sim_stamp(hours, 0.0)
@@ -223,7 +223,7 @@ def test_a_forecast_at_once_and_new_robots_served_while_the_gp_is_selected(rosla
     publisher = rospy.Publisher("/people_counts", PeopleCount, queue_size=100)
     diagnostics = []
     rospy.Subscriber("/diagnostics", DiagnosticArray, diagnostics.append)
-    wait_until(lambda: publisher.get_num_connections() > 0, 90, what="a subscriber")
+    wait_for_subscriber(publisher, NODE, 90)
     sim = PeopleSimulator.from_building(building, 0.5, seed=3)
     free = np.arange(sim.cells.n_cells)
     seen, unseen = free[: free.size // 2], free[free.size // 2:]
