@@ -86,3 +86,25 @@ def test_the_controller_held_up_in_a_cup_of_clutter_drives_round_it_to_the_goal(
     assert result.collision is None
     assert result.reached, controller.status_
     assert controller.detours_ >= 1
+
+
+def test_held_up_again_after_a_detour_it_backs_up_unless_something_is_behind():
+    features = HallwayFeatures()
+    weights = dict.fromkeys(features.names, 0.0)
+    weights.update(path_progress=10.0, speed_squared=-10.0, speed_effort=-1.0, turn_effort=-1.0)
+    reward = LinearReward([weights[n] for n in features.names], features)
+    scene = hall([])
+    angles = np.linspace(-math.pi, math.pi, 36, endpoint=False)
+    state = np.array([2.0, 2.1, 0.0, 0.0, 0.0])
+    for behind, backs in ((5.0, True), (0.2, False)):
+        ranges = np.full(36, 5.0)
+        ranges[[17, 18, 19]] = 0.2          # straight ahead, inside 0.18 + 0.05 m
+        ranges[0] = behind
+        controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=None,
+                                       settings={"max_iter": 2}, safety=dict(HALLWAY_SAFETY),
+                                       grid=scene.grid)
+        commands = [controller.act(state, t, angles, ranges, np.zeros((0, 2)), np.zeros((0, 2)))
+                    for t in np.arange(0.0, 10.0, 0.1)]     # held up at 4 s and again at 8 s
+        assert (controller.detours_, controller.backups_) == (1, 1)
+        assert any(c[0] < 0 for c in commands) == backs
+        assert controller.status_.startswith("backing up") == backs

@@ -71,6 +71,13 @@ STOP_LOOK, STOP_SLACK = 0.05, 0.01
 # Progress along the path (m) that counts as getting on (the detour and blocked clocks), and the
 # detour's room: the safety stop's reach plus this much (m).
 PROGRESS_STEP, DETOUR_ROOM = 0.3, 0.05
+# Standing still for `blocked_after` s, or without PROGRESS_STEP m of progress for this many times
+# as long (trying detours and backing up), the path is reported blocked.
+PROGRESS_PATIENCE = 3.0
+# Held up again after a detour, the robot first backs up BACKUP_SPEED m/s for BACKUP_TIME s when
+# nothing is behind it (nav2's BackUp recovery): someone standing close in front - who may be
+# waiting for the robot to make way - gets room to walk on.
+BACKUP_SPEED, BACKUP_TIME = 0.15, 2.0
 # The scans a detour is planned on: one every SCAN_EVERY s over the last SCAN_MEMORY s (what the
 # robot saw on its way in: a cart hides what is behind it from where the robot stands).
 SCAN_EVERY, SCAN_MEMORY = 0.5, 10.0
@@ -195,9 +202,10 @@ class HallwayController:
         budget = None if self.budget is None else PLANNING_SHARE * self.budget
         self.planner = RecedingHorizonController(planned, self.model, budget=budget,
                                                  **self.settings)
-        self.status_ = "following"
-        self.detours_ = 0
+        self.status_, self.held_since_ = "following", None
+        self.detours_ = self.backups_ = 0
         self._left, self._getting_on, self._tried = math.inf, 0.0, 0.0
+        self._recoveries, self._backing_until = 0, -math.inf
         self._scans, self._scanned = deque(maxlen=int(SCAN_MEMORY / SCAN_EVERY)), -math.inf
 
     @property
@@ -221,10 +229,14 @@ class HallwayController:
         left = self.follower.length - self.follower.progress
         if left < self._left - PROGRESS_STEP:
             self._left, self._getting_on, self._tried = left, t, t
+            self._recoveries = 0
         wait = self.safety.get("replan_after", 0.0)
         if not wait or wait <= 0 or t - self._tried < wait:
             return False
-        self._tried = t
+        self._tried, self._recoveries = t, self._recoveries + 1
+        if self._recoveries % 2 == 0:       # every other time held up: back up first
+            self._backing_until, self.backups_ = t + BACKUP_TIME, self.backups_ + 1
+            return False
         path = plan_detour(self.follower, state[:2],
                            list(self._scans)[:-1] + [(laser, angles, ranges)],
                            clearance=self.safety["robot_radius"] + self.safety["stop_margin"]
@@ -250,22 +262,34 @@ class HallwayController:
         task = self.task(state, t, angles, ranges, people, velocities)
         if self._detour(state, t, angles, ranges):
             task = self.task(state, t, angles, ranges, people, velocities)
-        if t - self._getting_on >= self.safety["blocked_after"]:
-            self.status_ = (f"blocked: held up {t - self._getting_on:.0f} s at "
-                            f"{self.follower.progress:.1f} of {self.follower.length:.1f} m "
-                            f"({self.detours_} detours tried)")
-            return np.zeros(2)
+        if t - self._getting_on >= PROGRESS_PATIENCE * self.safety["blocked_after"]:
+            return self._blocked(t - self._getting_on)
+        if t < self._backing_until:
+            command = np.array([-BACKUP_SPEED, 0.0])
+            if self._too_close(angles, ranges, state[3], command) is None:
+                self.held_since_, self.status_ = None, "backing up: held up"
+                return command
+            self._backing_until = -math.inf
         command = self.planner.act(state, t, task, started=started)
         reason = self._too_close(angles, ranges, state[3], command)
         moving = abs(state[3]) > 0.05 or abs(command[0]) > 0.05
         if reason is None and moving:
-            self.status_ = "following"
+            self.held_since_, self.status_ = None, "following"
             return command
+        self.held_since_ = t if self.held_since_ is None else self.held_since_
+        if t - self.held_since_ >= self.safety["blocked_after"]:
+            return self._blocked(t - self.held_since_)
         if reason is not None:      # no way on: it may still turn in place (round robot)
             self.status_ = f"stopped: {reason}"
             return np.array([0.0, float(command[1])])
         self.status_ = "waiting"
         return command
+
+    def _blocked(self, held: float) -> np.ndarray:
+        self.status_ = (f"blocked: held up {held:.0f} s at {self.follower.progress:.1f} of "
+                        f"{self.follower.length:.1f} m ({self.detours_} detours, "
+                        f"{self.backups_} backing up tried)")
+        return np.zeros(2)
 
     def _too_close(self, angles, ranges, speed: float, command) -> Optional[str]:
         """Why the scan forbids the command, or None: moving straight on (the way of its speed

@@ -106,13 +106,14 @@ class RewardControllerParams(NodeConfig):
                                   "the scan's sight")
     safety_margin: float = param(0.05, "path mode: zero command while the scan shows anything "
                                        "within this distance (m) of the robot's edge")
-    blocked_after: float = param(20.0, "path mode: held up (no 0.3 m of progress along the "
-                                       "path) this long (s), the path is reported blocked (ERROR "
-                                       "on /diagnostics) and the robot stays stopped until a new "
-                                       "path or goal")
-    replan_after: float = param(4.0, "path mode: held up this long (s), follow a detour planned "
-                                     "on ~map and the scan round what blocks the path (again as "
-                                     "often while held up); 0: never")
+    blocked_after: float = param(20.0, "path mode: stood still this long (s), or without 0.3 m "
+                                       "of progress along the path for 3 x as long, the path is "
+                                       "reported blocked (ERROR on /diagnostics) and the robot "
+                                       "stays stopped until a new path or goal")
+    replan_after: float = param(4.0, "path mode: without 0.3 m of progress this long (s), follow "
+                                     "a detour planned on ~map and the scan round what blocks "
+                                     "the path, the next time back up 0.3 m first (if nothing "
+                                     "is behind), and so on; 0: never")
     laser_offset: float = param(0.1, "path mode: the laser frame's distance ahead of the base (m)")
     person_radius: float = param(0.25, "path mode: radius of a tracked person (m)")
     barrier_margin: float = param(0.1, "path mode: fixed barrier this far (m) beyond touching a "

@@ -25,6 +25,7 @@ __all__ = ["HallwayControllerNode"]
 
 LEVELS = {"following": DiagnosticStatus.OK, "arrived": DiagnosticStatus.OK,
           "waiting": DiagnosticStatus.OK, "stopped": DiagnosticStatus.WARN,
+          "backing up": DiagnosticStatus.WARN,
           "blocked": DiagnosticStatus.ERROR, "no path": DiagnosticStatus.WARN}
 
 
@@ -45,9 +46,9 @@ class HallwayControllerNode:
     Topics out: cmd_vel (geometry_msgs/Twist), ~cycle_time (std_msgs/Float64), /diagnostics
       (diagnostic_msgs/DiagnosticArray, name "reward_controller: path"): OK following (progress,
       waypoint) / arrived, WARN stopped (zero speed, turning allowed: what the scan shows inside
-      the margin on its way) or no path, ERROR
-      blocked (held up - no 0.3 m of progress - longer than ~blocked_after, detours tried: the
-      robot stays stopped until a new path).
+      the margin on its way), backing up (held up again after a detour) or no path, ERROR
+      blocked (stood still ~blocked_after s, or no 0.3 m of progress for 3 x that, detours and
+      backing up tried: the robot stays stopped until a new path).
     Services: ~enable (std_srvs/SetBool).
     """
 
@@ -169,7 +170,8 @@ class HallwayControllerNode:
             item.values = [KeyValue("following", self.source),
                            KeyValue("progress_m", f"{follower.progress:.2f}"),
                            KeyValue("length_m", f"{follower.length:.2f}"),
-                           KeyValue("detours", str(controller.detours_))]
+                           KeyValue("detours", str(controller.detours_)),
+                           KeyValue("backing_up", str(controller.backups_))]
         array = DiagnosticArray(status=[item])
         array.header.stamp = rospy.Time.now()
         self.diagnostics.publish(array)
