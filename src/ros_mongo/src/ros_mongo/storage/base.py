@@ -6,7 +6,9 @@ A backend subclasses `MessageStore`, implements its primitives (`_setup`, `_batc
 `close`, and `ensure_indexes` where it has indexes) and registers itself for its URL schemes with
 `register_backend`. Everything users call lives here; the stored document layout is in
 `ros_mongo.storage.documents`. This module imports no backend: `ros_mongo.storage.backends`
-imports each one, and each registers itself on import.
+imports each one, and each registers itself on import; a backend whose client library is costly
+to import (MongoDB's pymongo) is named with `register_backend_module` instead and imported the
+first time a URL of its schemes is opened.
 
 Write errors (taxonomy in ros_mongo.errors): `_write_batch` raises StoreUnavailable (retry later),
 StoreRefused (operator must act) or BatchTooLarge (refused as a whole because of one document:
@@ -15,6 +17,7 @@ own merits as "<id>: <reason>" strings; `insert_records` stores every other docu
 one DocumentsRejected naming the refused ids.
 """
 import abc
+import importlib
 import threading
 import time
 from io import BytesIO
@@ -36,7 +39,7 @@ from ros_mongo.storage.documents import stored_message, topic_from_doc
 from ros_mongo.urls import check_url, redact_url
 
 __all__ = ["MessageStore", "PreparedRecords", "BLOB_THRESHOLD", "redact_url", "register_backend",
-           "backend_for_url", "registered_schemes"]
+           "register_backend_module", "backend_for_url", "registered_schemes"]
 
 #: Serialized messages larger than this go to attachments (CouchDB) or GridFS (MongoDB).
 BLOB_THRESHOLD = 256 * 1024
@@ -334,6 +337,7 @@ def _serialize(msg) -> bytes:
 # -- the backend registry ------------------------------------------------------------------------
 StoreT = TypeVar("StoreT", bound=Type[MessageStore])
 _BACKENDS: Dict[str, Type[MessageStore]] = {}
+_BACKEND_MODULES: Dict[str, str] = {}   # scheme -> module that registers its backend on import
 
 
 def register_backend(*schemes: str) -> Callable[[StoreT], StoreT]:
@@ -348,8 +352,24 @@ def register_backend(*schemes: str) -> Callable[[StoreT], StoreT]:
     return register
 
 
+def register_backend_module(module: str, *schemes: str) -> None:
+    """The backend of these schemes lives in `module` (which registers it with `register_backend`)
+    and is imported, with its client library, the first time it is needed."""
+    for scheme in schemes:
+        _BACKEND_MODULES.setdefault(scheme.lower(), module)
+
+
+def _import_backends(scheme: Optional[str] = None) -> None:
+    """Import the not yet imported backend module of `scheme` (None: of every scheme)."""
+    wanted = [scheme] if scheme is not None else sorted(_BACKEND_MODULES)
+    for name in wanted:
+        if name in _BACKEND_MODULES and name not in _BACKENDS:
+            importlib.import_module(_BACKEND_MODULES[name])
+
+
 def registered_schemes() -> Dict[str, str]:
     """URL scheme -> backend name ("couchdb", "mongodb") of every registered backend."""
+    _import_backends()
     return {scheme: store_cls.backend for scheme, store_cls in sorted(_BACKENDS.items())}
 
 
@@ -357,8 +377,10 @@ def backend_for_url(url: str) -> Type[MessageStore]:
     """The backend class for `url`'s scheme (StoreError for a malformed URL or unknown scheme)."""
     check_url(url)
     scheme = url.split("://", 1)[0].lower()
+    _import_backends(scheme)
     store_cls = _BACKENDS.get(scheme)
     if store_cls is None:
+        _import_backends()
         uses = {}
         for known, owner in _BACKENDS.items():
             uses.setdefault(owner.backend_title, []).append(known + "://")
