@@ -54,8 +54,8 @@ __all__ = ["HALLWAY_DRIVING", "HALLWAY_SAFETY", "room_margin", "TaskBuilder", "H
 # discount 0.97, a barrier 0.1 m beyond touching, a safety stop (zero speed; turning in place
 # allowed) when moving on would bring the scan within 0.05 m of the robot's edge, the path
 # reported blocked after 20 s held up (without 0.3 m of progress), a detour after 4 s held up,
-# the local waypoint 4 m ahead on the path or as far up to there as the path stays in the scan's
-# sight, tracked people hiding nothing (further than a 4 s window
+# the local waypoint 4 m ahead on the path or the furthest point up to there in the scan's sight,
+# tracked people hiding nothing (further than a 4 s window
 # or the look-ahead travels: a waypoint passed inside a window turns its progress feature around);
 # on the last stretch, the goal in sight, the waypoint 4 m away through the goal (TaskBuilder).
 HALLWAY_DRIVING = {"horizon": 12, "plan_dt": 0.4, "terminal": 0.0, "spread_seeds": True,

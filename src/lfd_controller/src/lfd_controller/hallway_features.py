@@ -192,20 +192,16 @@ class PathFollower:
                ) -> np.ndarray:
         """Move the progress to the path point nearest `position` (within the search window) and
         return the local waypoint: `lookahead` m further on, or with `visible` (point -> bool,
-        e.g. from the scan) as far up to there as the path stays in sight all the way (at least
-        0.5 m on: round a corner the waypoint waits at the corner; a stretch seen again beyond
-        what hides the path is not the way there)."""
+        e.g. from the scan) the furthest point up to there that is in sight (at least 0.5 m on:
+        round a corner the waypoint waits at the corner)."""
         position = np.asarray(position, float)[:2]
         near = np.flatnonzero((self.arc >= self.progress - self.lookahead)
                               & (self.arc <= self.progress + self.window))
         if len(near):
             self.progress = max(self.progress - self.lookahead, self._nearest(position, near))
-        if visible is None:
-            return self.point_at(self.progress + self.lookahead)
-        ahead = min(0.5, self.lookahead)
-        while ahead < self.lookahead and visible(self.point_at(self.progress + min(
-                ahead + 0.25, self.lookahead))):
-            ahead = min(ahead + 0.25, self.lookahead)
+        ahead = self.lookahead
+        while visible is not None and ahead > 0.5 and not visible(self.point_at(self.progress + ahead)):
+            ahead -= 0.25
         return self.point_at(self.progress + ahead)
 
     def _nearest(self, position, near) -> float:

@@ -102,8 +102,8 @@ class RewardControllerParams(NodeConfig):
     frame: str = param("odom", "frame of the published plan")
     enabled: bool = param(True, "drive from the start (service ~enable switches)")
     lookahead: float = param(4.0, "path mode (a hallway reward): the local waypoint this far (m) "
-                                  "along the path, or as far up to there as the path stays in "
-                                  "the scan's sight")
+                                  "along the path, or the furthest point up to there in the "
+                                  "scan's sight")
     safety_margin: float = param(0.05, "path mode: zero command while the scan shows anything "
                                        "within this distance (m) of the robot's edge")
     blocked_after: float = param(20.0, "path mode: stood still this long (s), or without 0.3 m "

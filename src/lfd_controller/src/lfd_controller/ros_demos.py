@@ -1,7 +1,7 @@
 """Demonstrations as ROS messages, in bag files and in the database (ros_mongo)."""
 import time
 from pathlib import Path
-from typing import List, Optional, Sequence, Tuple
+from typing import TYPE_CHECKING, List, Optional, Sequence, Tuple
 
 import numpy as np
 import rosbag
@@ -9,8 +9,10 @@ import rospy
 
 from lfd_controller.demos import Demonstration
 from lfd_controller.errors import DemonstrationError
-from lfd_controller.hallway_recording import RecordedSensors
 from lfd_controller.msg import Demonstration as DemonstrationMsg
+
+if TYPE_CHECKING:  # imported where the bags are read: the recorder node never needs the hallway
+    from lfd_controller.hallway_recording import RecordedSensors  # model (and its SciPy imports)
 
 DEMO_TOPIC = "/lfd/demonstrations"
 REWARD_TOPIC = "/lfd/rewards"
@@ -77,9 +79,11 @@ def read_bags(paths: Sequence[Path]) -> List[Demonstration]:
     return demos
 
 
-def read_building_bags(paths: Sequence[Path]) -> List[Tuple[Demonstration, RecordedSensors]]:
+def read_building_bags(paths: Sequence[Path]) -> List[Tuple[Demonstration, "RecordedSensors"]]:
     """(demonstration, what the robot saw) of each bag that holds a building drive (its path,
     scans and people: SENSOR_TOPICS); bags without a path are left out."""
+    from lfd_controller.hallway_recording import RecordedSensors
+
     drives = []
     for path in _bag_files(paths):
         try:
