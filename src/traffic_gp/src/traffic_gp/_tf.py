@@ -27,6 +27,9 @@ def libs() -> SimpleNamespace:
     """
     if not _LIBS:
         os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+        # tf.keras as tf_keras (Keras 2, what GPflow's optimiser comes from anyway): TensorFlow
+        # then does not import Keras 3 (with pandas and matplotlib), about a CPU-second per process
+        os.environ.setdefault("TF_USE_LEGACY_KERAS", "1")
         import tensorflow as tf
 
         threads = int(os.environ.get("TRAFFIC_GP_TF_THREADS")
