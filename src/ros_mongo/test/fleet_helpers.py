@@ -25,6 +25,17 @@ def all_docs(db_url):
         start = rows[500]["id"]
 
 
+def holds(db_url, count) -> bool:
+    """Whether the database holds at least `count` documents (its doc_count: one small request).
+    It holds at least as many documents as messages, so a wait for `count` messages reads them
+    all (`all_docs`, tens of milliseconds of the server's and this process's CPU a poll) only
+    once this is true."""
+    try:
+        return requests.get(db_url, timeout=30).json()["doc_count"] >= count
+    except (requests.RequestException, ValueError, KeyError):
+        return False
+
+
 def messages(docs):
     return [d for d in docs if d.get("kind") == "message"]
 

@@ -15,7 +15,7 @@ import pytest
 import requests
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray
-from fleet_helpers import FleetRobot, all_docs, content, messages
+from fleet_helpers import FleetRobot, all_docs, content, holds, messages
 from nav_msgs.msg import Odometry
 from ros_mongo_samples import serialized
 from sensor_msgs.msg import Image
@@ -166,7 +166,7 @@ def test_central_restart_resumes_replication_from_its_checkpoint(tmp_path):
                 local = CouchDatabase(local_url)
                 replication = PushReplication.for_robot(local, CouchDatabase(central_url), robot_id)
                 replication.start()
-                wait_until(lambda: count_messages(central_url) == FIRST, LONG,
+                wait_until(lambda: holds(central_url, FIRST) and count_messages(central_url) == FIRST, LONG,
                            what=f"{FIRST} messages central")
                 # the checkpoint the store's replicator keeps on central (its id from central's log)
                 log = server_log_since_start(central)
@@ -188,7 +188,8 @@ def test_central_restart_resumes_replication_from_its_checkpoint(tmp_path):
                 assert count_messages(local_url) == FIRST + 60
                 central.start()
                 replication.trigger()  # what the replicator node does when central is back
-                wait_until(lambda: count_messages(central_url) == FIRST + 60, LONG,
+                wait_until(lambda: holds(central_url, FIRST + 60)
+                           and count_messages(central_url) == FIRST + 60, LONG,
                            what="every message central")
                 wait_until(lambda: checkpoint_seq() > before, LONG, what="the checkpoint moving on")
 
@@ -224,7 +225,8 @@ def test_a_robot_pushes_to_a_real_couchdb_central_as_its_member(apache_couchdb, 
         replication = PushReplication.for_robot(CouchDatabase(local_url), CouchDatabase(central_url),
                                                 robot_id)
         replication.start()
-        wait_until(lambda: count_messages(admin_url) == count + 1, LONG, what=f"{count + 1} messages central")
+        wait_until(lambda: holds(admin_url, count + 1) and count_messages(admin_url) == count + 1, LONG,
+                   what=f"{count + 1} messages central")
         wait_until(lambda: same_documents(local_url, admin_url), LONG, what="the same revisions central")
         docs = all_docs(admin_url)
         image = next(d for d in messages(docs) if d["topic"] == "/camera/rgb/image_raw")
@@ -259,7 +261,8 @@ def test_robot_store_restart_mid_replication_loses_nothing(tmp_path):
         local = CouchDatabase(local_url)
         replication = PushReplication.for_robot(local, CouchDatabase(central_url), robot_id)
         replication.start()
-        wait_until(lambda: count_messages(central_url) == 20, LONG, what="the first 20 images central")
+        wait_until(lambda: holds(central_url, 20) and count_messages(central_url) == 20, LONG,
+                   what="the first 20 images central")
         central.stop()
         with open_store(local_url) as store:
             record_images(store, 20, 20)  # pending: the replicator cannot send them
@@ -270,7 +273,8 @@ def test_robot_store_restart_mid_replication_loses_nothing(tmp_path):
         # the replication document persisted: the restarted store's replicator resumes it; the
         # trigger is what the replicator node does when central answers again
         replication.trigger()
-        wait_until(lambda: count_messages(central_url) == 70, LONG, what="70 messages central")
+        wait_until(lambda: holds(central_url, 70) and count_messages(central_url) == 70, LONG,
+                   what="70 messages central")
         assert same_documents(local_url, central_url)
         central_docs = all_docs(central_url)
         assert [d["_id"] for d in central_docs if d.get("_conflicts")] == []
@@ -330,14 +334,16 @@ def test_replicator_reports_lag_and_obeys_start_stop_trigger(roslaunch, rospy_no
                 rospy.sleep(0.01)  # the publisher's pace, not synchronisation
 
         send(0, 20)
-        wait_until(lambda: count_messages(central_url) == 20, LONG, what="20 messages central")
+        wait_until(lambda: holds(central_url, 20) and count_messages(central_url) == 20, LONG,
+                   what="20 messages central")
         wait_until(lambda: status.get("pending_docs") == "0", LONG, what="nothing pending")
 
         stop = rospy.ServiceProxy("/ros_mongo_replicator/stop", Trigger)()
         assert stop.success, stop.message
         wait_until(lambda: status.get("state") == "stopped", LONG, what="state stopped")
         send(20, 30)
-        wait_until(lambda: count_messages(robot.database_url("robot_data")) == 50, LONG,
+        wait_until(lambda: holds(robot.database_url("robot_data"), 50)
+                   and count_messages(robot.database_url("robot_data")) == 50, LONG,
                    what="50 messages in the robot's store")
         wait_until(lambda: int(status.get("lag_docs", "0")) >= 30, LONG, what="lag of 30 documents")
         assert float(status.get("lag_seconds")) > 0
@@ -346,7 +352,8 @@ def test_replicator_reports_lag_and_obeys_start_stop_trigger(roslaunch, rospy_no
 
         start = rospy.ServiceProxy("/ros_mongo_replicator/start", Trigger)()
         assert start.success, start.message
-        wait_until(lambda: count_messages(central_url) == 50, LONG, what="50 messages central")
+        wait_until(lambda: holds(central_url, 50) and count_messages(central_url) == 50, LONG,
+                   what="50 messages central")
         wait_until(lambda: status.get("pending_docs") == "0", LONG, what="caught up")
         trigger = rospy.ServiceProxy("/ros_mongo_replicator/trigger", Trigger)()
         assert trigger.success, trigger.message
@@ -398,13 +405,15 @@ def test_robots_with_local_stores_put_each_message_central_once_through_outages(
             robot.publish(count, rate, hold_at=hold)
 
         # mid-stream: every robot has replicated some messages, then the central server stops
-        wait_until(lambda: all(robot_counts(central_url).get(r.robot_id, 0) >= 30 for r in robots),
+        wait_until(lambda: holds(central_url, 30 * len(robots))
+                   and all(robot_counts(central_url).get(r.robot_id, 0) >= 30 for r in robots),
                    LONG, what="30 messages of each robot central")
         central.stop()
         held = {r.robot_id: count_messages(r.url) for r in robots}
         for robot in robots:
             robot.go_file.touch()  # the rest of the stream comes while central is down
-        wait_until(lambda: all(count_messages(r.url) >= held[r.robot_id] + 40 for r in robots),
+        wait_until(lambda: all(holds(r.url, held[r.robot_id] + 40)
+                               and count_messages(r.url) >= held[r.robot_id] + 40 for r in robots),
                    LONG, what="recording goes on while central is down")
         # a robot's local store restarts mid-replication (the recorder spools meanwhile)
         robots[0].store.restart()
@@ -413,7 +422,7 @@ def test_robots_with_local_stores_put_each_message_central_once_through_outages(
         wait_until(lambda: not any(r.publisher.alive for r in robots), LONG, what="all published")
         published = {r.robot_id: r.published() for r in robots}
         expected = sum(sum(p.values()) for p in published.values())
-        wait_until(lambda: count_messages(central_url) == expected, LONG,
+        wait_until(lambda: holds(central_url, expected) and count_messages(central_url) == expected, LONG,
                    what=f"{expected} messages central")
 
         central_docs = all_docs(central_url)

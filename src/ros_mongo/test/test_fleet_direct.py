@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 import requests
-from fleet_helpers import FleetRobot, all_docs, content, messages
+from fleet_helpers import FleetRobot, all_docs, content, holds, messages
 from ros_mongo_samples import serialized
 from std_msgs.msg import String
 
@@ -83,8 +83,9 @@ def test_direct_fleet_keeps_each_message_once_through_a_central_outage_and_a_rob
         for robot in robots:
             robot.launch.wait_for_subscribers(["/odom", "/camera/rgb/image_raw"], timeout=LONG)
             robot.publish(count, rate, hold_at=hold)
-        wait_until(lambda: all(central_counts(admin_url).get(r.robot_id, 0) >= 30
-                               for r in robots), LONG, what="30 messages of each robot central")
+        wait_until(lambda: holds(admin_url, 30 * len(robots))
+                   and all(central_counts(admin_url).get(r.robot_id, 0) >= 30 for r in robots), LONG,
+                   what="30 messages of each robot central")
 
         central.stop()  # the central outage: every robot spools
         for robot in robots:
@@ -103,7 +104,8 @@ def test_direct_fleet_keeps_each_message_once_through_a_central_outage_and_a_rob
         for sent in published.values():
             assert sent == {"/odom": count, "/camera/rgb/image_raw": count // 10}
         expected = sum(sum(p.values()) for p in published.values())
-        wait_until(lambda: sum(central_counts(admin_url).values()) >= expected, LONG,
+        wait_until(lambda: holds(admin_url, expected) and sum(central_counts(admin_url).values()) >= expected,
+                   LONG,
                    what=f"{expected} messages central")
 
         docs = all_docs(admin_url)
