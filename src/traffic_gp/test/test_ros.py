@@ -215,8 +215,10 @@ def test_a_forecast_at_once_and_new_robots_served_while_the_gp_is_selected(rosla
 
     building = generate_building(0)
     map_yaml = save_map(building.grid, tmp_path / "map.yaml")
+    # publish_period 1 s: /diagnostics (and the cost maps) each second, not every 5 s; the GP's
+    # choice runs in the background until the node stops, so a shorter wait costs less CPU
     launch = roslaunch("traffic_gp", "traffic_gp.launch", map_yaml=str(map_yaml), min_rows=600,
-                       utc_offset_hours=0, clock="observations")
+                       utc_offset_hours=0, clock="observations", publish_period=1.0)
     launch.wait_for_services([f"{NODE}/predict_count", f"{NODE}/status"], timeout=90)
     count, _ = services(rospy)
     status = rospy.ServiceProxy(f"{NODE}/status", Trigger)
