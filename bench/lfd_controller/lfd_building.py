@@ -173,10 +173,9 @@ METHODS = ("person", "learned", "cloning", "social_force", "sampling")
 
 
 def table():
-    methods = METHODS
-    print("| family | floor drives | " + " | ".join(methods) + " | learned time x person | "
+    print("| family | floor drives | " + " | ".join(METHODS) + " | learned time x person | "
           "closest learned vs person (median m) | acceptance |")
-    print("|" + " --- |" * (len(methods) + 5))
+    print("|" + " --- |" * (len(METHODS) + 5))
     cycles8 = []
     for path in sorted(out_dir().glob("*.json")):
         if path.name == "baselines.json":
@@ -184,7 +183,7 @@ def table():
         data = json.loads(path.read_text())
         rows = data["rows"]
         cells = []
-        for method in methods:
+        for method in METHODS:
             runs = [r[method] for r in rows if method in r]
             hits = sum(r["collision"] is not None for r in runs)
             cells.append(f"{sum(r['success'] for r in runs)}/{len(runs)} ({hits} coll.)")

@@ -8,8 +8,9 @@ command - or, when moving on would bring the scan inside its safety margin, a ze
 (turning in place: a round robot touches nothing that way), saying why
 (`status_`). A robot held up (without 0.3 m of progress along the path) for `replan_after`
 seconds follows a detour planned on the floor map and the scan (detour.plan_detour) round what
-the path's planner never saw; held up for `blocked_after` seconds it reports the path blocked and
-stays stopped. Learning (`fit_hallway_reward`) is CIOC over the same tasks, built from the
+the path's planner never saw, and held up again first backs up; standing still for
+`blocked_after` seconds, or held up for 3 x as long, it reports the path blocked and stays
+stopped. Learning (`fit_hallway_reward`) is CIOC over the same tasks, built from the
 demonstrations' own scans and tracked people at the start of each 4 s window, then an
 acceptance check with the controller in the loop (`hallway_acceptance`): refused only where
 the controller fails where the person succeeded.
@@ -53,7 +54,8 @@ __all__ = ["HALLWAY_DRIVING", "HALLWAY_SAFETY", "room_margin", "TaskBuilder", "H
 # of something static, a detour past it: planner.RecedingHorizonController's unstall),
 # discount 0.97, a barrier 0.1 m beyond touching, a safety stop (zero speed; turning in place
 # allowed) when moving on would bring the scan within 0.05 m of the robot's edge, the path
-# reported blocked after 20 s held up (without 0.3 m of progress), a detour after 4 s held up,
+# reported blocked after 20 s standing still or 60 s held up (without 0.3 m of progress), a
+# detour after 4 s held up and backing up the next time,
 # the local waypoint 4 m ahead on the path or the furthest point up to there in the scan's sight,
 # tracked people hiding nothing (further than a 4 s window
 # or the look-ahead travels: a waypoint passed inside a window turns its progress feature around);
@@ -94,16 +96,21 @@ def hallway_scenario(dt: float = 0.1, name: str = "hallway") -> Scenario:
                     bounds=(-1e4, -1e4, 1e4, 1e4))
 
 
+def laser_pose(pose, offset: float):
+    """(x, y, yaw) of a laser `offset` m ahead of the base at `pose` (x, y, yaw, ...)."""
+    x, y, yaw = (float(v) for v in pose[:3])
+    return x + offset * math.cos(yaw), y + offset * math.sin(yaw), yaw
+
+
 def task_from_view(waypoint, goal, pose, angles, ranges, people, velocities, now: float,
                    laser_offset: float = 0.0) -> HallwayTask:
     """The planning instant's HallwayTask from the robot's pose (x, y, yaw), its scan (angles in
     the laser frame, `laser_offset` m ahead of the base) and the tracked people (map frame)."""
-    x, y, yaw = (float(v) for v in pose[:3])
-    laser = (x + laser_offset * math.cos(yaw), y + laser_offset * math.sin(yaw), yaw)
+    laser = laser_pose(pose, laser_offset)
     people = np.asarray(people, float).reshape(-1, 2)
     points = scan_points(laser, angles, ranges, people=people)
     return HallwayTask(waypoint, goal, points, people, np.asarray(velocities, float).reshape(-1, 2),
-                       now, robot=np.array([x, y]))
+                       now, robot=np.array(pose[:2], float))
 
 
 class TaskBuilder:
@@ -129,8 +136,7 @@ class TaskBuilder:
         return self.follower.path[-1]
 
     def __call__(self, state, t: float, angles, ranges, people, velocities) -> HallwayTask:
-        laser = (state[0] + self.laser_offset * math.cos(state[2]),
-                 state[1] + self.laser_offset * math.sin(state[2]), state[2])
+        laser = laser_pose(state, self.laser_offset)
         visible = in_sight(laser, angles, ranges, people=people)
         waypoint = self.follower.update(state[:2], visible)
         if self.through_goal and np.allclose(waypoint, self.goal) and visible(self.goal):
@@ -212,17 +218,12 @@ class HallwayController:
     def goal(self) -> np.ndarray:
         return self.follower.path[-1]
 
-    @property
-    def path_(self) -> np.ndarray:
-        """The path followed now: the given one, or a detour and the rest of it."""
-        return self.follower.path
-
     def _detour(self, state, t: float, angles, ranges) -> bool:
-        """Keep the progress clocks; after `replan_after` s without PROGRESS_STEP m of progress
-        (and as often again while none comes) follow a detour (detour.plan_detour) through
-        what the scan has seen free. True when the path changed."""
-        laser = (state[0] + self.laser_offset * math.cos(state[2]),
-                 state[1] + self.laser_offset * math.sin(state[2]), state[2])
+        """Keep the scans and the progress clocks; after `replan_after` s without PROGRESS_STEP m
+        of progress (and as often again while none comes) follow a detour (detour.plan_detour,
+        on the floor map and the scans) or, every other time, back up first. True when the
+        path changed."""
+        laser = laser_pose(state, self.laser_offset)
         if t - self._scanned >= SCAN_EVERY:
             self._scans.append((laser, np.asarray(angles, float), np.asarray(ranges, float)))
             self._scanned = t
@@ -231,7 +232,7 @@ class HallwayController:
             self._left, self._getting_on, self._tried = left, t, t
             self._recoveries = 0
         wait = self.safety.get("replan_after", 0.0)
-        if not wait or wait <= 0 or t - self._tried < wait:
+        if wait <= 0 or t - self._tried < wait:
             return False
         self._tried, self._recoveries = t, self._recoveries + 1
         if self._recoveries % 2 == 0:       # every other time held up: back up first
