@@ -24,13 +24,23 @@ def corridor(inner_wall_col=None):
     return CellGrid.from_map(GridMap(cells, 0.1), 0.5)
 
 
-def full_scan(stamp, x, y, *, ranges=math.inf, beams=720, yaw=0.0, span=2 * math.pi):
-    """A scan from (x, y); 360 degrees unless `span` says otherwise; no return by default."""
+def full_scan(stamp, x, y, *, ranges=math.inf, beams=720, yaw=0.0, span=2 * math.pi, hits=(),
+              radius=0.25):
+    """A scan from (x, y); 360 degrees unless `span` says otherwise; no return by default, and
+    beams that meet the disc of `radius` round a person of `hits` stop where they enter it."""
     if span >= 2 * math.pi:
         angles = np.linspace(-math.pi, math.pi, beams, endpoint=False)
     else:
         angles = np.linspace(-span / 2, span / 2, beams)
-    return Scan(stamp, (x, y, yaw), angles, np.full(beams, ranges, dtype=float), 0.05, 10.0)
+    readings = np.full(beams, ranges, dtype=float)
+    for person in hits:
+        dx, dy = person.x - x, person.y - y
+        for i, angle in enumerate(angles + yaw):
+            along = dx * math.cos(angle) + dy * math.sin(angle)     # along the beam
+            across = abs(dy * math.cos(angle) - dx * math.sin(angle))
+            if along > 0 and across < radius:
+                readings[i] = min(readings[i], along - math.sqrt(radius ** 2 - across ** 2))
+    return Scan(stamp, (x, y, yaw), angles, readings, 0.05, 10.0)
 
 
 def cell_at(cells, x, y):
@@ -68,7 +78,7 @@ def test_a_person_hides_the_cells_in_their_shadow_and_is_counted_in_their_own_ce
     cells = corridor()
     counter = PeopleCounter(cells, person_radius=0.25, min_detections=1)
     person = Detection("p1", 2.25, 1.25)
-    counter.add(full_scan(0.0, 0.75, 1.25), [person])
+    counter.add(full_scan(0.0, 0.75, 1.25, hits=[person]), [person])
     seen = seen_of(counter.flush())
     # 1.5 m ahead, a 0.25 m disc shades beams within asin(0.25 / 1.5) = 9.6 degrees beyond its
     # far side (1.75 m at most): every sample point of the cell at (4.75, 1.25) is 3.8 m away or
@@ -85,7 +95,7 @@ def test_a_person_behind_another_is_not_counted():
     cells = corridor()
     counter = PeopleCounter(cells, min_detections=1)
     front, behind = Detection("front", 2.25, 1.25), Detection("behind", 4.25, 1.25)
-    counter.add(full_scan(0.0, 0.75, 1.25), [front, behind])
+    counter.add(full_scan(0.0, 0.75, 1.25, hits=[front, behind]), [front, behind])
     watch = counter.flush()
     counts = dict(zip(watch.cells.tolist(), watch.counts.tolist()))
     assert counts[cell_at(cells, 2.25, 1.25)] == 1
@@ -164,7 +174,7 @@ def test_the_watch_exposure_counts_the_seconds_each_cell_was_seen():
     blocker = Detection("blocker", 2.25, 1.25)
     for step in range(41):                             # scans at t = 0, 0.5, .., 20
         people = [blocker] if step <= 20 else []          # in the way until t = 10
-        counter.add(full_scan(step * 0.5, 0.75, 1.25), people)
+        counter.add(full_scan(step * 0.5, 0.75, 1.25, hits=people), people)
     watch = counter.flush()
     seen = seen_of(watch)
     assert watch.duration == pytest.approx(20.0)
@@ -188,3 +198,62 @@ def test_watches_end_after_the_watch_seconds_and_when_time_goes_back():
 def test_bad_settings_are_refused():
     with pytest.raises(TrafficError, match="watch=0"):
         PeopleCounter(corridor(), watch=0)
+    with pytest.raises(TrafficError, match="confirm_time=5.0"):
+        PeopleCounter(corridor(), watch=5.0, confirm_time=5.0)
+
+
+def test_a_tracked_disc_the_laser_reads_past_hides_nothing():
+    cells = corridor()
+    counter = PeopleCounter(cells, person_radius=0.25)
+    ghost = Detection("ghost", 2.25, 1.25)          # tracked, but every beam through it reads on
+    counter.add(full_scan(0.0, 0.75, 1.25), [ghost])
+    seen = seen_of(counter.flush())
+    # the beams through its disc have no return: they saw the cell behind it, 3.75 m along the
+    # line and beyond, whole (a person the laser met would hide it: the shadow test above)
+    assert seen[cell_at(cells, 4.75, 1.25)] == pytest.approx(1.0)
+
+
+def test_a_half_hidden_person_is_counted():
+    cells = corridor()
+    counter = PeopleCounter(cells, person_radius=0.25, min_detections=1)
+    front, half_hidden = Detection("front", 2.25, 1.25), Detection("half", 4.25, 1.75)
+    counter.add(full_scan(0.0, 0.75, 1.25, hits=[front, half_hidden]), [front, half_hidden])
+    watch = counter.flush()
+    counts = dict(zip(watch.cells.tolist(), watch.counts.tolist()))
+    # seen from (0.75, 1.25): the front disc spans bearings up to asin(0.25 / 1.5) = 9.6
+    # degrees; the other's centre is at atan(0.5 / 3.5) = 8.1 degrees (its beam stops at the
+    # front disc), its disc spans 8.1 +- asin(0.25 / 3.54) = 4.1..12.2 degrees: the beams of
+    # 9.6..12.2 degrees reach it, so it is seen and counted in its cell
+    assert counts[cell_at(cells, 2.25, 1.25)] == 1
+    assert counts[cell_at(cells, 4.25, 1.75)] == 1
+
+
+def test_a_people_message_used_for_two_scans_confirms_its_tracks_once():
+    cells = corridor()
+    counter = PeopleCounter(cells, watch=100.0, min_detections=3)
+    person = Detection("slow", 2.25, 1.25)
+    for step in range(4):             # a tracker at half the laser's rate: messages at 0 and 0.2 s
+        message = (step // 2) * 0.2
+        counter.add(full_scan(step * 0.1, 0.75, 1.25, hits=[person]), [person], seen_at=message)
+    assert counter.flush().counts.sum() == 0         # two detections, not four
+    counter.add(full_scan(0.4, 0.75, 1.25, hits=[person]), [person], seen_at=0.4)
+    assert counter.flush().counts.sum() == 1         # the third message confirms the track
+
+
+def test_a_person_first_seen_at_a_watchs_end_counts_in_it_once_confirmed():
+    cells = corridor()
+    counter = PeopleCounter(cells, watch=1.0, min_detections=3, confirm_time=0.45)
+    late = Detection("late", 2.25, 1.25)
+    ended = {}
+    for step in range(20):                           # scans at 0, 0.1, .., 1.9 s
+        people = [late] if step >= 9 else []         # seen from t = 0.9, the first watch's last
+        watch = counter.add(full_scan(step / 10, 0.75, 1.75, hits=people), people)
+        if watch is not None:
+            ended[step] = watch
+    # the first watch (scans 0..0.9 s) ends at the scan of 1.0 s and is returned at the first scan
+    # 0.45 s after its last (1.4 s); by then the track has its 3 detections (0.9, 1.0, 1.1 s)
+    assert list(ended) == [14]
+    first = ended[14]
+    assert (first.start, first.duration) == (0.0, pytest.approx(0.9))
+    counts = dict(zip(first.cells.tolist(), first.counts.tolist()))
+    assert counts[cell_at(cells, 2.25, 1.25)] == 1 and first.counts.sum() == 1

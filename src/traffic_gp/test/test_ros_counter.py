@@ -27,15 +27,17 @@ def test_the_counter_counts_the_simulated_crowd_as_it_truly_was(roslaunch, rospy
         recorder.stop()
     status = rospy_node.ServiceProxy("/people_counter/status", Trigger)().message
     assert "robot robot_7" in status and "scans used" in status, status
+    # the simulator's tracker reports on every scan, just after it: each scan waits for its own
+    # people message (taking the one before counted its tracks twice and varied with the load)
+    assert "scans sharing a people message 0," in status, status
     cells = CellGrid.from_map(generate_building(0).grid, 0.5)
     watches = recorder.watches(cells)
     assert {(w.robot_id, w.frame_id) for w in watches} == {("robot_7", "map")}
     result = check_counts(cells, watches, recorder.true_scans(), max_range=8.0)
     assert result.truth >= 50, result.line()
-    # the 10% target is the benchmark's (24 watches on a quiet machine, bench/traffic_gp/
-    # people_counting.py: 1.04). These 8 watches vary more, and with both cores busy the counter
-    # counts fewer than on a quiet machine (quiet 0.97; busy 0.81-0.91 in four runs, no scan
-    # skipped): 25% here, so a counter that misses or doubles people still fails
-    assert 0.75 <= result.count_ratio <= 1.25, result.line()
+    # the 10% target is the benchmark's (bench/traffic_gp/people_counting.py, 24 watches). These
+    # 8 watches gave 0.95 quiet and 0.95-0.96 with both cores busy (two runs each; people seen in
+    # fewer than min_detections scans are never counted): 15% here
+    assert 0.85 <= result.count_ratio <= 1.15, result.line()
     assert result.recall >= 0.95, result.line()
     assert result.hidden_reported == 0, result.line()

@@ -19,6 +19,13 @@ only part of the watch, or by a moving robot, has the exposure of its first look
 seen part) plus the people who may have walked in while it was seen (seen part x seen seconds /
 dwell_time); its reported `fraction` is that exposure divided by area x (1 + duration /
 dwell_time), so the crowd model reads exactly that exposure back.
+
+A tracked person is seen by a scan when some beam reaches their disc (not only the beam nearest
+their reported centre: in a crowd a person is often half hidden, and the tracked position is
+noisy). A track's detections are the people messages it was reported in (`seen_at`): a message
+used for two scans confirms its tracks once. A finished watch is held `confirm_time` seconds of
+scans more before it is returned, so that a person first seen at its end whose track is confirmed
+just after it still counts in it.
 """
 import math
 from dataclasses import dataclass, field
@@ -30,7 +37,8 @@ from robot_common.cells import DWELL_TIME_S, CellGrid
 from robot_common.maps import beam_indices, ray_disc_hits, raycast
 from traffic_gp.errors import TrafficError
 
-__all__ = ["Detection", "Scan", "Watch", "PeopleCounter", "beam_ranges", "seen_points"]
+__all__ = ["Detection", "Scan", "Watch", "PeopleCounter", "beam_ranges", "seen_points",
+           "people_seen"]
 
 
 @dataclass(frozen=True)
@@ -84,12 +92,15 @@ class _Open:
 
 def beam_ranges(scan: Scan, vis_grid, people: Sequence[Detection], *, max_range: float,
                 person_radius: float) -> np.ndarray:
-    """How far each beam sees (m), never beyond the map's walls (ray cast in the map). A beam that
-    reaches a tracked person's disc (its reading is not shorter than the disc) sees up to the
-    disc's far side, at most a diameter beyond the reading (tracked positions are noisy): the
-    person's spot is seen, what is behind is not. Any other beam sees its
-    reading plus a person's radius (a person the tracker missed: their centre). NaN and readings
-    below range_min see nothing; +inf and readings above range_max (no return) see to range_max."""
+    """How far each beam sees (m), never beyond the map's walls (ray cast in the map). A beam
+    whose reading is at a tracked person's disc (not shorter than the disc, not more than a
+    radius beyond its far side) sees up to the disc's far side, at most a diameter beyond the
+    reading (tracked positions are noisy): the person's spot is seen, what is behind is not. Any
+    other beam sees its reading plus a person's radius (a person the tracker missed: their
+    centre); so does a beam that reads farther than a tracked disc it crosses: it passed that
+    spot (the tracked position is off by a few centimetres at the disc's edge, or a false
+    track). NaN and readings below range_min see nothing; +inf and readings above range_max (no
+    return) see to range_max."""
     x, y, yaw = scan.pose
     measured = np.asarray(scan.ranges, dtype=float)
     reach = min(max_range, scan.range_max)
@@ -98,7 +109,8 @@ def beam_ranges(scan: Scan, vis_grid, people: Sequence[Detection], *, max_range:
     world = yaw + np.asarray(scan.angles, dtype=float)
     near, far = ray_disc_hits(x, y, world, [(person.x, person.y) for person in people],
                               person_radius)
-    on_person = np.isfinite(near) & (measured >= near - person_radius)
+    on_person = (np.isfinite(near) & (measured >= near - person_radius)
+                 & (measured <= far + person_radius))
     stops = np.where(on_person, np.minimum(far, measured + 2 * person_radius),
                      measured + person_radius)
     walls = raycast(vis_grid, x, y, world, reach)
@@ -116,6 +128,22 @@ def seen_points(scan: Scan, stops: np.ndarray, px, py, *, tolerance: float = 1e-
     return result
 
 
+def people_seen(scan: Scan, stops: np.ndarray, px, py, radius: float) -> np.ndarray:
+    """Which people (centres px, py) the scan saw: some beam through their disc of `radius` stops
+    no nearer than where it enters the disc (a person behind another, or behind a wall, is not
+    seen; one half hidden is). A zero radius tests the centre's beam."""
+    px, py = np.asarray(px, dtype=float), np.asarray(py, dtype=float)
+    if radius <= 0:
+        return seen_points(scan, stops, px, py)
+    x, y, yaw = scan.pose
+    world = yaw + np.asarray(scan.angles, dtype=float)
+    seen = np.zeros(px.shape, dtype=bool)
+    for k, centre in enumerate(zip(px.tolist(), py.tolist())):
+        entry, _ = ray_disc_hits(x, y, world, [centre], radius)     # inf: the beam misses it
+        seen[k] = bool(np.any(stops >= entry - 1e-6))
+    return seen
+
+
 class PeopleCounter:
     """Turns scans and tracked people into watches of per-cell counts (see the module docstring).
 
@@ -125,45 +153,49 @@ class PeopleCounter:
         max_range: metres of a scan used for counting (the scanner's range_max caps it too).
         person_radius: metres; a tracked person's disc occludes what is behind it.
         dwell_time: seconds a person stays in view of one cell (the crowd model's `dwell_time`).
-        min_detections: scans a track must be detected in before it counts.
+        min_detections: detections (people messages) a track needs before it counts.
         max_gap: the most seconds one scan stands for (a pause in the scans is not watching).
         sub: sample points per cell side.
         vis_resolution: metres; the map is ray cast at about this resolution.
         smoothing: weight of a new detection in a track's smoothed position (1: none).
         cell_margin: metres a track's smoothed position must be beyond its cell to move on.
+        confirm_time: seconds of scans a finished watch waits for its tracks' confirmation.
     """
 
     def __init__(self, cells: CellGrid, *, watch: float = 10.0, max_range: float = 8.0,
                  person_radius: float = 0.25, dwell_time: float = DWELL_TIME_S,
                  min_detections: int = 3, max_gap: float = 0.5, sub: int = 3,
-                 vis_resolution: float = 0.1, smoothing: float = 0.3, cell_margin: float = 0.1):
+                 vis_resolution: float = 0.1, smoothing: float = 0.3, cell_margin: float = 0.1,
+                 confirm_time: float = 1.0):
         if not (watch > 0 and max_range > 0 and person_radius >= 0 and dwell_time > 0
                 and max_gap > 0 and sub >= 1 and min_detections >= 1 and 0 < smoothing <= 1
-                and cell_margin >= 0):
+                and cell_margin >= 0 and 0 <= confirm_time < watch):
             raise TrafficError(f"bad counter settings: watch={watch} max_range={max_range} "
                                f"person_radius={person_radius} dwell_time={dwell_time} "
-                               f"max_gap={max_gap} sub={sub} min_detections={min_detections}")
+                               f"max_gap={max_gap} sub={sub} min_detections={min_detections} "
+                               f"confirm_time={confirm_time} (0 <= confirm_time < watch)")
         self.cells, self.watch, self.max_range = cells, watch, max_range
         self.person_radius, self.dwell_time = person_radius, dwell_time
         self.min_detections, self.max_gap = min_detections, max_gap
         self.smoothing, self.cell_margin = smoothing, cell_margin
+        self.confirm_time = confirm_time
         self.vis_grid = cells.grid.downsample(
             max(1, int(round(vis_resolution / cells.grid.resolution))))
         offsets = (np.arange(sub) + 0.5) / sub - 0.5
         self._dx = np.repeat(offsets, sub) * cells.cell_size
         self._dy = np.tile(offsets, sub) * cells.cell_size
-        self._hits: Dict[str, int] = {}       # track -> scans it was detected in
+        self._hits: Dict[str, int] = {}       # track -> people messages it was in
         self._tracks: Dict[str, List] = {}    # track -> [smoothed x, y, its cell]
         self._last_seen: Dict[str, float] = {}
         self._open: Optional[_Open] = None
+        self._ended: List[_Open] = []        # ended, waiting confirm_time for confirmations
 
-    def add(self, scan: Scan, people: Sequence[Detection]) -> Optional[Watch]:
-        """Take one scan and the people detected at its time; a finished watch, if this scan
-        ends one (the scan then starts the next watch)."""
-        finished = None
-        if self._open is not None and (scan.stamp < self._open.last
-                                       or scan.stamp - self._open.start >= self.watch):
-            finished = self.flush()
+    def add(self, scan: Scan, people: Sequence[Detection], *,
+            seen_at: Optional[float] = None) -> Optional[Watch]:
+        """Take one scan and the people detected at its time (`seen_at`: the stamp of their people
+        message, default the scan's); a finished watch, if one is done: a watch ends at the scan
+        that starts the next and is returned `confirm_time` seconds of scans later."""
+        finished = self._due(scan.stamp)
         if self._open is None:
             self._open = _Open(scan.stamp, scan.stamp)
         current = self._open
@@ -176,8 +208,22 @@ class PeopleCounter:
         for cell, part in zip(index.tolist(), parts.tolist()):
             current.first_look[cell] = max(current.first_look.get(cell, 0.0), part)
             current.seen_time[cell] = current.seen_time.get(cell, 0.0) + part * seconds
-        self._count(scan, stops, people, set(index.tolist()))
+        self._count(scan, stops, people, set(index.tolist()),
+                    scan.stamp if seen_at is None else seen_at)
         return finished
+
+    def _due(self, stamp: float) -> Optional[Watch]:
+        """End the open watch if a scan at `stamp` ends it; the oldest ended watch whose
+        confirm_time has passed (at once when time went back), if any."""
+        current = self._open
+        if current is not None and (stamp < current.last or stamp - current.start >= self.watch):
+            self._ended.append(current)
+            self._open = None
+        for ended in self._ended:
+            if stamp < ended.last or stamp - ended.last >= self.confirm_time:
+                self._ended.remove(ended)
+                return self._finish(ended)
+        return None
 
     def _cells_seen(self, scan: Scan, stops: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         x, y, _ = scan.pose
@@ -190,21 +236,20 @@ class PeopleCounter:
         return near[keep], parts[keep]
 
     def _count(self, scan: Scan, stops: np.ndarray, people: Sequence[Detection],
-               seen: Set[int]) -> None:
+               seen: Set[int], seen_at: float) -> None:
         if not people:
             return
         current = self._open
         px = np.array([p.x for p in people])
         py = np.array([p.y for p in people])
-        visible = seen_points(scan, stops, px, py,
-                              tolerance=max(1e-3, 0.5 * self.person_radius))
+        visible = people_seen(scan, stops, px, py, self.person_radius)
         where = self.cells.index_at(px, py)
         untracked: Dict[int, int] = {}
         for person, ok, cell in zip(people, visible.tolist(), where.tolist()):
             if not ok or cell < 0:
                 continue
             if person.name:
-                cell = self._track_cell(person, cell, scan.stamp)
+                cell = self._track_cell(person, cell, seen_at)
                 if cell in seen:
                     current.tracks.setdefault(cell, set()).add(person.name)
             elif cell in seen:
@@ -212,12 +257,14 @@ class PeopleCounter:
         for cell, number in untracked.items():
             current.untracked[cell] = max(current.untracked.get(cell, 0), number)
 
-    def _track_cell(self, person: Detection, cell: int, stamp: float) -> int:
+    def _track_cell(self, person: Detection, cell: int, seen_at: float) -> int:
         """The cell a track is in: its position smoothed over its detections, and a new cell
         only once the smoothed position is `cell_margin` beyond the old one (a person standing
-        at a cell's edge is not counted in both cells as the position jitters)."""
-        self._hits[person.name] = self._hits.get(person.name, 0) + 1
-        self._last_seen[person.name] = stamp
+        at a cell's edge is not counted in both cells as the position jitters). A detection
+        counts once per people message (`seen_at`)."""
+        if self._last_seen.get(person.name) != seen_at:
+            self._hits[person.name] = self._hits.get(person.name, 0) + 1
+        self._last_seen[person.name] = seen_at
         state = self._tracks.get(person.name)
         if state is None:
             self._tracks[person.name] = [person.x, person.y, cell]
@@ -233,10 +280,15 @@ class PeopleCounter:
         return state[2]
 
     def flush(self) -> Optional[Watch]:
-        """End the open watch: its counts (None when no scan came since the last watch)."""
+        """End the watches now: the one waiting for confirmations if any, else the open one
+        (call again for the next; None when no scan came since the last watch)."""
+        if self._ended:
+            return self._finish(self._ended.pop(0))
         current, self._open = self._open, None
-        if current is None:
-            return None
+        return None if current is None else self._finish(current)
+
+    def _finish(self, current: _Open) -> Watch:
+        """The counts of an ended watch, its tracks confirmed as they are now."""
         duration = current.last - current.start
         index = np.array(sorted(current.first_look), dtype=np.int64)
         exposure = np.array([current.first_look[c] + current.seen_time[c] / self.dwell_time

@@ -93,8 +93,8 @@ class PeopleCounterParams(NodeConfig):
                                  minimum=0.0)
     dwell_time: float = param(20.0, "seconds a person stays in view of one cell (the crowd "
                                     "model's dwell_time)")
-    min_detections: int = param(3, "scans a track must be detected in before it counts",
-                                minimum=1)
+    min_detections: int = param(3, "detections (people messages) a track needs before it "
+                                   "counts", minimum=1)
     max_gap: float = param(0.5, "the most seconds one scan stands for", minimum=0.01)
     people_timeout: float = param(0.5, "s; a scan is used with the people message nearest its "
                                        "stamp within this; a scan without one is not used",
@@ -102,6 +102,10 @@ class PeopleCounterParams(NodeConfig):
     tf_timeout: float = param(0.5, "s to wait for the map -> laser transform of a scan",
                               minimum=0.0)
     map_frame: str = param("map", "frame of the map and of the published counts")
+    confirm_time: float = param(1.0, "s of scans an ended watch waits before it is published "
+                                     "(at most half the watch): a person first seen at its end "
+                                     "still counts in it once their track is confirmed",
+                                minimum=0.0)
 
     def make_counter(self, cells, **overrides):
         """The counter's core (`counting.PeopleCounter`) with these settings on `cells`."""
@@ -111,6 +115,7 @@ class PeopleCounterParams(NodeConfig):
                         person_radius=self.person_radius, dwell_time=self.dwell_time,
                         min_detections=self.min_detections, max_gap=self.max_gap)
         settings.update(overrides)
+        settings.setdefault("confirm_time", min(self.confirm_time, settings["watch"] / 2))
         return PeopleCounter(cells, **settings)
 
     def check(self) -> None:

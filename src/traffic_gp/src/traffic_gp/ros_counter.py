@@ -10,7 +10,7 @@ import queue
 import socket
 import threading
 from collections import deque
-from typing import Deque, List, Optional, Tuple
+from typing import Deque, List, Optional, Sequence, Tuple
 
 import rospy
 import tf2_ros
@@ -27,7 +27,7 @@ from robot_common.ros_node import pose_2d, read_config
 from traffic_gp.counting import Detection, PeopleCounter, Scan, Watch
 from traffic_gp.params import PeopleCounterParams
 
-__all__ = ["PEOPLE_TYPES", "read_people", "PeopleCounterNode", "start"]
+__all__ = ["PEOPLE_TYPES", "read_people", "nearest_people", "PeopleCounterNode", "start"]
 
 # People messages read by their layout: robot_common's mirrors have the same fields in the same
 # order as people_msgs', so the same bytes. Each gives (header, [(track id, x, y)]).
@@ -51,6 +51,24 @@ def read_people(kind: str, data: bytes):
     return msg.header, [(p.object_id, p.pos.x, p.pos.y) for p in msg.people]
 
 
+def nearest_people(messages: Sequence[Tuple[float, List[Detection]]], stamp: float,
+                   timeout: float, *, final: bool = False
+                   ) -> Optional[Tuple[float, List[Detection]]]:
+    """The (stamp, people) of `messages` (in stamp order, as they came) nearest in time to
+    `stamp`, if within `timeout` seconds of it. A tracker reports on a scan after the scan: until
+    a message stamped at or after `stamp` has come the nearest is not yet known, so None unless
+    `final` (no more waiting)."""
+    stamps = [entry[0] for entry in messages]
+    if not final and (not stamps or stamps[-1] < stamp):
+        return None
+    at = bisect.bisect_left(stamps, stamp)
+    near = [i for i in (at - 1, at) if 0 <= i < len(stamps)]
+    best = min(near, key=lambda i: abs(stamps[i] - stamp), default=None)
+    if best is None or abs(stamps[best] - stamp) > timeout:
+        return None
+    return messages[best]
+
+
 class PeopleCounterNode:
     """Counts the people a robot sees, per map cell seen, over watches of ~watch seconds.
 
@@ -58,17 +76,20 @@ class PeopleCounterNode:
       ("": the `map` topic), ~cell_size (0.5 m), ~robot_id ("": the /robot_id parameter, else the
       host name), ~watch (10 s), ~max_range (8 m), ~person_radius (0.25 m), ~dwell_time (20 s),
       ~min_detections (3), ~max_gap (0.5 s), ~people_timeout (0.5 s), ~tf_timeout (0.5 s),
-      ~map_frame ("map").
+      ~map_frame ("map"), ~confirm_time (1 s).
     Subscribes: `scan` (sensor_msgs/LaserScan), `people` (robot_common/People or
       PositionMeasurementArray, or people_msgs/People or PositionMeasurementArray: read by their
       layout, which is the same), `map` (nav_msgs/OccupancyGrid, when map_yaml is empty); tf from
       ~map_frame to the scan's and the people's frames.
     Publishes: `people_counts` (robot_common/PeopleCount: the cells seen in a watch, their seen
       part, the people counted in each; header.stamp the watch's start).
-    Services: `~status` (std_srvs/Trigger: scans used and skipped, and why; watches published,
+    Services: `~status` (std_srvs/Trigger: scans used and skipped, and why; scans that shared a
+      people message with the scan before (a tracker slower than the laser); watches published,
       people counted).
     A scan is used only with a people message within ~people_timeout of its stamp and a
     transform to the map: without a tracker nothing is counted (no row says "nobody there").
+    The scan's people message is the one nearest its stamp, waited for (the tracker reports on a
+    scan after the scan); an ended watch is published ~confirm_time seconds of scans later.
     """
 
     def __init__(self, config: PeopleCounterParams):
@@ -78,7 +99,9 @@ class PeopleCounterNode:
         self._people: Deque[Tuple[float, List[Detection]]] = deque(maxlen=200)
         self._people_lock = threading.Lock()
         self._stop = threading.Event()
+        self._used_people: Optional[float] = None      # stamp of the last people message used
         self.tally = {"scans used": 0, "no people message": 0, "no transform": 0,
+                      "scans sharing a people message": 0,
                       "watches published": 0, "people counted": 0, "people messages": 0,
                       "other people types": 0}
         self.robot_id = config.robot_id
@@ -157,25 +180,24 @@ class PeopleCounterNode:
             if watch is not None:
                 self.publish(watch)
 
-    def _people_near(self, stamp: float) -> Optional[List[Detection]]:
-        """The tracked people nearest in time to `stamp` (waits up to people_timeout for them)."""
+    def _people_near(self, stamp: float) -> Optional[Tuple[float, List[Detection]]]:
+        """(stamp, people) of the people message nearest in time to `stamp` (`nearest_people`):
+        waits up to people_timeout for the tracker's message on this scan, not taking the
+        previous scan's people meanwhile."""
         deadline = rospy.get_time() + self.config.people_timeout
         while True:
+            final = rospy.get_time() >= deadline or self._stop.is_set()
             with self._people_lock:
-                stamps = [entry[0] for entry in self._people]
-                at = bisect.bisect_left(stamps, stamp)
-                near = [i for i in (at - 1, at) if 0 <= i < len(stamps)]
-                best = min(near, key=lambda i: abs(stamps[i] - stamp), default=None)
-                if best is not None and abs(stamps[best] - stamp) <= self.config.people_timeout:
-                    return self._people[best][1]
-            if rospy.get_time() >= deadline or self._stop.is_set():
-                return None
-            rospy.sleep(0.02)
+                found = nearest_people(self._people, stamp, self.config.people_timeout,
+                                       final=final)
+            if found is not None or final:
+                return found
+            rospy.sleep(0.01)
 
     def take(self, msg: LaserScan) -> Optional[Watch]:
         """Count one scan; the finished watch, if it ended one."""
-        people = self._people_near(msg.header.stamp.to_sec())
-        if people is None:
+        near = self._people_near(msg.header.stamp.to_sec())
+        if near is None:
             self.tally["no people message"] += 1
             rospy.logwarn_throttle(30, "people_counter: scans without a people message near their "
                                        "stamp are not used (is the tracker running?)")
@@ -193,7 +215,10 @@ class PeopleCounterNode:
         scan = Scan(msg.header.stamp.to_sec(), pose, angles, msg.ranges, msg.range_min,
                     msg.range_max)
         self.tally["scans used"] += 1
-        return self.counter.add(scan, people)
+        if near[0] == self._used_people:    # the tracker is slower than the laser (or stopped)
+            self.tally["scans sharing a people message"] += 1
+        self._used_people = near[0]
+        return self.counter.add(scan, near[1], seen_at=near[0])
 
     def publish(self, watch: Watch) -> None:
         if len(watch.cells) == 0:
