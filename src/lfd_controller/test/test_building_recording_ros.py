@@ -1,11 +1,16 @@
 """Recording a drive in a building for real (roscore, roslaunch): the demo recorder keeps the
 path, the scan and the tracked people beside the steps, and learn_reward --kind hallway learns a
-path-mode reward from the bag. The drive is a simulated person's in a corridor with someone
+path-mode reward from the bag, checked with the controller on the recording (its map from the
+scans, its people replayed) and accepted. The drive is a simulated person's in a corridor with someone
 walking the other way; the test publishes what the simulator saw at each step."""
+import os
+import sys
+
 import numpy as np
 import pytest
 import rosbag
 import rospy
+import yaml
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from nav_msgs.msg import Odometry, Path
 from sensor_msgs.msg import LaserScan, TimeReference
@@ -19,16 +24,15 @@ pytestmark = pytest.mark.ros
 
 
 def corridor_drive():
-    """A person's drive down a 5 m corridor: (scene, states x_0..x_T, actions, observations)."""
-    from lfd_controller.sim.hallway_people import HallwayDriver
-    from robot_common.maps import FREE, OCCUPIED, GridMap
-    from robot_sim.hallway import HallwayScene, Walker, drive
+    """A person's drive down a 5 m corridor (test_recorded_check's): (scene, states x_0..x_T,
+    actions, observations)."""
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from test_recorded_check import corridor_scene
 
-    cells = np.full((26, 70), OCCUPIED, dtype=np.int8)
-    cells[1:-1, 1:-1] = FREE
-    path = np.column_stack([np.linspace(1.0, 6.0, 51), np.full(51, 1.3)])
-    walker = Walker("p0", "head_on", np.array([[6.0, 0.55], [1.0, 0.55]]), speed=0.6)
-    scene = HallwayScene(GridMap(cells, 0.1), path, np.array([1.0, 1.3, 0.0, 0.0, 0.0]), [walker])
+    from lfd_controller.sim.hallway_people import HallwayDriver
+    from robot_sim.hallway import drive
+
+    scene = corridor_scene()
     driver, seen = HallwayDriver("sampling_mpc", 0).reset(scene), []
 
     def policy(state, t, observation):
@@ -120,3 +124,7 @@ def test_the_recorder_keeps_scan_people_and_path_and_a_hallway_reward_is_learned
     reward = load_reward(output)
     named = dict(zip(reward.features.names, reward.weights))
     assert reward.features.kind == "hallway" and named["path_progress"] > 0
+    info = yaml.safe_load(output.read_text())["info"]
+    assert info["acceptance"]["accepted"] is True, info["acceptance"]
+    assert info["acceptance"]["drives"][0]["drive"] == bag_file.name
+    assert info["controller"]["barrier_margin"] >= 0.1

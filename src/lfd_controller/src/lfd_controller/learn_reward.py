@@ -8,13 +8,13 @@ keeps those of some robots only, and the summary and the stored reward's info co
 demonstrations per robot (`demonstrations_per_robot`).
 
 Every failure to read or write a source is an LfdError (DemonstrationError when no usable
-demonstration is found; RewardNotAcceptedError for a person reward refused by its acceptance
-check), which `main` turns into one `ERROR:` line and exit status 1.
+demonstration is found; RewardNotAcceptedError for a person or hallway reward refused by its
+acceptance check), which `main` turns into one `ERROR:` line and exit status 1.
 """
 import json
 import sys
 import time
-from typing import Dict, List, Optional, Sequence
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import yaml
 from std_msgs.msg import String
@@ -23,9 +23,10 @@ from lfd_controller import ros_demos
 from lfd_controller.demos import Demonstration
 from lfd_controller.errors import DemonstrationError, LfdError
 from lfd_controller.hallway import calibrate_pace, fit_hallway_reward
-from lfd_controller.hallway_recording import moving_speed, recorded_windows
-from lfd_controller.learning import learn_and_save, save_reward
+from lfd_controller.hallway_recording import RecordedSensors, moving_speed, recorded_windows
+from lfd_controller.learning import RewardNotAcceptedError, learn_and_save, save_reward
 from lfd_controller.params import LearnRewardParams
+from lfd_controller.recorded_check import check_recorded
 from robot_common.errors import ConfigError
 from ros_mongo import StoreError, open_store, redact_url
 
@@ -92,39 +93,77 @@ def store_reward(reward, db_url: str, info: Optional[dict] = None) -> str:
         raise LfdError(f"cannot store the reward in {db_url}: {err}") from err
 
 
-def learn_building_reward(bags, *, output: str, seed: int = 0) -> str:
-    """A hallway reward from building drives recorded in bags (the steps with the path, scans
-    and tracked people the recorder kept): CIOC on their 4 s windows (fit_hallway_reward), the
-    pace set to the drives' median moving speed (calibrate_pace). No acceptance check: it needs
-    the building with the controller in the loop (bench/lfd_controller/lfd_building.py runs it).
-    The scans are taken as seen from the base (a laser ahead of it shifts the scan points)."""
-    drives = ros_demos.read_building_bags(bags) if bags else []
+def read_building_drives(bags) -> Tuple[List[Tuple[Demonstration, RecordedSensors]], List[str]]:
+    """(demonstration, what the robot saw) of each building drive in the bags, and a name for
+    each (its bag's); DemonstrationError when there is none."""
+    drives, names = [], []
+    for path in ros_demos._bag_files(bags):
+        found = ros_demos.read_building_bags([path])
+        drives += found
+        names += [path.name] * len(found)
     if not drives:
         raise DemonstrationError("no building demonstrations (bags with /path, /scan and /people "
                                  "beside the steps; the database keeps the steps only) in "
                                  f"{list(bags)}")
+    return drives, names
+
+
+def learn_building_reward(bags, *, output: str, seed: int = 0, accept_mismatch: bool = False,
+                          progress: Callable[[str], None] = lambda _: None) -> str:
+    """A hallway reward from building drives recorded in bags (the steps with the path, scans
+    and tracked people the recorder kept): CIOC on their 4 s windows (fit_hallway_reward), the
+    pace set to the drives' median moving speed (calibrate_pace); then the acceptance check on
+    the recordings themselves (recorded_check.check_recorded: the controller with the barrier
+    margin of the person's room drives each recording's start along its path, on a map built
+    from its scans among its replayed people). A reward refused there is not saved
+    (RewardNotAcceptedError names the failing drives) unless `accept_mismatch` (then the file
+    says so). The file's info holds the verdict and `controller: {barrier_margin}`. The scans
+    are taken as seen from the base (a laser ahead of it shifts the scan points)."""
+    drives, names = read_building_drives(bags)
     started = time.monotonic()
-    windows = [window for demo, sensors in drives for window in recorded_windows(demo, sensors)]
+    progress(f"learning from {len(drives)} building drives")
+    windows = []
+    for name, (demo, sensors) in zip(names, drives):
+        try:
+            windows += recorded_windows(demo, sensors)
+        except DemonstrationError as err:
+            raise DemonstrationError(f"{name}: {err}") from err
     reward, learner = fit_hallway_reward(windows, seed)
     reward = calibrate_pace(reward, moving_speed([demo for demo, _ in drives]))
     seconds = time.monotonic() - started
+    progress(f"learned from {len(windows)} windows in {seconds:.1f} s; the acceptance check "
+             f"drives the controller through the {len(drives)} recordings")
+    checked = check_recorded(reward, drives, names=names, progress=progress)
+    if not checked.accepted and not accept_mismatch:
+        raise RewardNotAcceptedError(checked)
+    verdict = checked.to_dict()
+    if not checked.accepted:
+        verdict["saved_anyway"] = "refused by the acceptance check, saved with --accept-mismatch"
     path = save_reward(reward, output, demonstrations=len(drives), windows=len(windows),
                        learning_seconds=round(seconds, 2),
                        log_likelihood_per_demo=float(learner.log_likelihood_),
-                       acceptance="not checked: needs the building with the controller in the loop")
+                       acceptance=verdict,
+                       controller={"barrier_margin": round(checked.margin, 4)})
+    state = ("accepted: " if checked.accepted else
+             "saved although NOT accepted (--accept-mismatch): "
+             + "; ".join(checked.failure_lines()) + " | ")
     return (f"learned a hallway reward from {len(drives)} building drives ({len(windows)} windows) "
-            f"in {seconds:.1f} s -> {path}\nweights: "
+            f"in {seconds:.1f} s -> {path}\n{state}" + "; ".join(checked.drive_lines())
+            + "\nweights: "
             + json.dumps(reward.to_dict()["weights"]))
 
 
 def learn_from_sources(bags, db_url: str = "", *, scenario: str = "", session_id: str = "",
                        robot_ids: Sequence[str] = (), kind: str = "linear", output: str,
                        store_db: bool = False, plots: str = "", seed: int = 0,
-                       trim_steps: Optional[int] = 10, accept_mismatch: bool = False) -> str:
+                       trim_steps: Optional[int] = 10, accept_mismatch: bool = False,
+                       progress: Callable[[str], None] = lambda _: None) -> str:
     """Load, learn, save (store with `store_db` and a `db_url`, and plot); returns a summary
-    whose last line counts the demonstrations per robot (also in the stored reward's info)."""
+    whose last line counts the demonstrations per robot (also in the stored reward's info).
+    `progress` gets lines while a hallway reward is checked."""
     if kind == "hallway":
-        return learn_building_reward(bags, output=output, seed=seed)
+        return learn_building_reward(bags, output=output, seed=seed,
+                                     accept_mismatch=accept_mismatch, progress=progress)
     demos = load_sources(bags, db_url, scenario, session_id, robot_ids)
     per_robot = demos_per_robot(demos)
 
@@ -138,6 +177,10 @@ def learn_from_sources(bags, db_url: str = "", *, scenario: str = "", session_id
     return f"{summary}\ndemonstrations per robot: {robots}"
 
 
+def _progress(line: str) -> None:
+    print(f"learn_reward: {line}", file=sys.stderr, flush=True)
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """learn_reward's command line (options: params.LearnRewardParams; --help lists them)."""
     args = [a for a in (sys.argv[1:] if argv is None else argv) if not a.startswith("__")]
@@ -147,7 +190,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                      session_id=config.session_id, robot_ids=config.robot_ids,
                                      kind=config.kind, output=config.output, store_db=config.store_db,
                                      plots=config.plots, seed=config.seed, trim_steps=config.trim,
-                                     accept_mismatch=config.accept_mismatch)
+                                     accept_mismatch=config.accept_mismatch,
+                                     progress=_progress)
     except (ConfigError, LfdError) as err:
         print(f"ERROR: {err}", file=sys.stderr)
         return 1
