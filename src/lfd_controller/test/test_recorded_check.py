@@ -12,7 +12,7 @@ from lfd_controller.errors import DemonstrationError
 from lfd_controller.hallway import calibrate_pace, fit_hallway_reward, hallway_scenario
 from lfd_controller.hallway_recording import RecordedSensors, moving_speed, recorded_windows
 from lfd_controller.learning import RewardNotAcceptedError
-from lfd_controller.recorded_check import check_recorded, recorded_map
+from lfd_controller.recorded_check import RecordedWorld, ReplayedPeople, check_recorded, recorded_map
 from robot_common.maps import FREE, OCCUPIED, UNKNOWN, GridMap
 
 
@@ -132,6 +132,23 @@ def test_the_map_of_a_recording_keeps_walls_not_people_and_only_what_beams_saw_i
     # untracked, the same person's returns are an obstacle
     demo, sensors = standing_recording([wall_and_person_scan(0.1 * k) for k in range(10)])
     assert OCCUPIED in near(recorded_map(demo, sensors), 0.0, 1.25, 0.1)
+
+
+def test_touching_a_replayed_person_counts_only_when_the_robot_drives_into_them():
+    open_floor = GridMap(np.full((40, 40), FREE, np.int8), 0.1, (-2.0, -2.0, 0.0))
+    standing = ReplayedPeople([(0.0, np.array([[0.4, 0.0]]), np.zeros((1, 2)))])
+    world = RecordedWorld(open_floor, standing)         # robot 0.18 m + person 0.25 m: 0.43 m
+    # driving at 0.5 m/s: 0.05 m a step; at x = 0 the robot is 0.40 m from the person's centre
+    # and was 0.45 m one step before - its own step brought it onto them
+    assert world.contact(np.array([0.0, 0.0, 0.0, 0.5, 0.0]), 0.5) == "person"
+    assert world.contact(np.array([-0.2, 0.0, 0.0, 0.5, 0.0]), 0.5) is None    # 0.6 m: not yet
+    assert world.contact(np.array([0.0, 0.0, math.pi, 0.5, 0.0]), 0.5) is None  # backing away
+    # someone walking at 1 m/s into a robot standing (or creeping) where the recorded one was not
+    walking = ReplayedPeople([(0.0, np.array([[0.9, 0.0]]), np.array([[-1.0, 0.0]]))])
+    world = RecordedWorld(open_floor, walking)
+    assert world.contact(np.array([0.0, 0.0, 0.0, 0.0, 0.0]), 0.5) is None
+    assert world.contact(np.array([0.0, 0.0, 0.0, 0.1, 0.0]), 0.5) is None
+    assert world.person_gap(np.array([0.0, 0.0, 0.0, 0.0, 0.0]), 0.5) == pytest.approx(-0.03)
 
 
 def test_scans_from_outside_the_drive_are_a_clear_error_naming_the_drive():

@@ -14,7 +14,8 @@ recording itself (a Demonstration plus hallway_recording.RecordedSensors):
     most REPORT_HOLD s; before the first report nobody). They do NOT react to the robot: a
     person who made way for the demonstrator walks the same way whatever the controller does,
     and someone who stepped aside for the person stands where they stood; touching one counts
-    only where the robot drives into them (a replayed person walks through a standing robot).
+    only where the robot drives into them (a replayed person walks on into a robot that is not
+    where the recorded one was).
     Only people the recording tracked exist;
   * the person's own figures from the recording (`recorded_figures`: success = the drive ends
     within SUCCESS_TOLERANCE of the path's end without touching an occupied cell or a person
@@ -26,7 +27,7 @@ recording itself (a Demonstration plus hallway_recording.RecordedSensors):
     along the recorded path, a Unicycle stepping it, scans ray-cast from the laser
     (`laser_offset` m ahead of the base) on the map plus the people's discs at the recording's
     beam angles, until it reaches the goal, touches something (robot disc on an occupied cell,
-    or on a person's disc while moving toward them) or runs out of time: TIME_FACTOR x the
+    or on a person's disc driving into them) or runs out of time: TIME_FACTOR x the
     person's time + TIME_EXTRA s;
   * the verdict (`check_recorded`): hallway.hallway_acceptance on the person's and the
     controller's figures (refused only where the controller fails where the person succeeded),
@@ -79,7 +80,8 @@ SUCCESS_TOLERANCE = 0.3
 # The controller's time: 1.5 x the person's (hallway_acceptance refuses a median time over
 # that anyway) + 20 s (one hold-up as long as ~blocked_after, resolved, still arrives).
 TIME_FACTOR, TIME_EXTRA = 1.5, 20.0
-# Touching a replayed person is the robot's doing when it moves toward them this fast (m/s).
+# Touching a replayed person is the robot's doing when it closes in on them this fast (m/s) and
+# faster than they close in on it.
 CLOSING = 0.05
 NOBODY = (np.zeros((0, 2)), np.zeros((0, 2)))
 
@@ -169,12 +171,13 @@ def _cell_counts(grid: GridMap, xs, ys) -> np.ndarray:
 @dataclass
 class RecordedWorld:
     """One recorded drive as a world to drive in: its map, its replayed people, the robot's and
-    a person's radius. `contact`, `person_gap` and `scan` answer as a simulator would."""
+    a person's radius, the time step. `contact`, `person_gap` and `scan` answer as a simulator would."""
 
     grid: GridMap
     people: ReplayedPeople
     robot_radius: float = HALLWAY_SAFETY["robot_radius"]
     person_radius: float = HALLWAY_SAFETY["person_radius"]
+    dt: float = 0.1
     _nearest: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -204,20 +207,25 @@ class RecordedWorld:
 
     def contact(self, state, t: float) -> Optional[str]:
         """"wall" (an occupied cell), "person" or None: what the robot at `state` touches. A
-        replayed person counts only when the robot moves toward them at over CLOSING m/s:
-        replayed people walk on through a standing or retreating robot, where real people
-        would have stepped round it."""
+        replayed person counts only when the robot drives into them: its last step (dt at its
+        speed) brought it onto them, closing in at over CLOSING m/s and faster than they close
+        in on it (replayed people walk on into a robot that is not where the recorded one was,
+        where real people would have waited or stepped round it)."""
         if self.wall_gap(state) < self.robot_radius:
             return "wall"
-        positions, _ = self.people.at(t)
-        if not len(positions):
-            return None
+        positions, velocities = self.people.at(t)
+        reach = self.robot_radius + self.person_radius
+        heading = np.array([math.cos(state[2]), math.sin(state[2])])
         offsets = positions - np.asarray(state[:2], float)
         distances = np.hypot(*offsets.T)
-        touching = distances < self.robot_radius + self.person_radius
-        velocity = float(state[3]) * np.array([math.cos(state[2]), math.sin(state[2])])
-        closing = offsets[touching] @ velocity > CLOSING * np.maximum(distances[touching], 1e-9)
-        return "person" if closing.any() else None
+        before = np.hypot(*(offsets + self.dt * float(state[3]) * heading).T)
+        new = (distances < reach) & (before >= reach)
+        if not new.any():
+            return None
+        toward = offsets[new] / np.maximum(distances[new], 1e-9)[:, None]
+        robot = toward @ (float(state[3]) * heading)
+        person = -np.sum(toward * velocities[new], axis=1)
+        return "person" if np.any((robot > CLOSING) & (robot >= person)) else None
 
     def scan(self, state, t: float, angles, laser_offset: float) -> np.ndarray:
         """Ranges at laser-frame `angles` from a laser `laser_offset` m ahead of the base at
@@ -241,7 +249,7 @@ def recorded_world(demo: Demonstration, sensors: RecordedSensors, **radii) -> Re
         raise DemonstrationError("the demonstration's recorded states are not all finite")
     person_radius = radii.get("person_radius", HALLWAY_SAFETY["person_radius"])
     return RecordedWorld(recorded_map(demo, sensors, person_radius=person_radius),
-                         ReplayedPeople(sensors.people), **radii)
+                         ReplayedPeople(sensors.people), dt=demo.scenario.dt, **radii)
 
 
 def recorded_figures(states, t0: float, dt: float, world: RecordedWorld, goal,
