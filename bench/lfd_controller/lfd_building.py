@@ -176,7 +176,7 @@ def table():
     print("| family | floor drives | " + " | ".join(METHODS) + " | learned time x person | "
           "closest learned vs person (median m) | acceptance |")
     print("|" + " --- |" * (len(METHODS) + 5))
-    cycles8 = []
+    cycles8, recovered = [], []
     for path in sorted(out_dir().glob("*.json")):
         if path.name == "baselines.json":
             continue
@@ -200,6 +200,12 @@ def table():
         print(f"| {data['family']} | {len(rows)} | " + " | ".join(cells)
               + f" | {ratio} | {room} | {verdict} |")
         cycles8 += [c for r in rows if r["people"] == 8 for c in r["learned"]["cycles"]]
+        recovered += [r["learned"] for r in rows if "recoveries" in r["learned"]]
+    for kind in ("detours", "backing_up", "giving_way"):
+        used = [r for r in recovered if r["recoveries"][kind]]
+        if used:
+            print(f"learned drives with {kind}: {len(used)} of {len(recovered)} "
+                  f"({sum(r['success'] for r in used)} of them reached the goal)")
     if cycles8:
         print(f"\ncycle time with 8 people, 0.1 s budget: {len(cycles8)} cycles, p50 "
               f"{np.percentile(cycles8, 50) * 1000:.0f} ms, p99 {np.percentile(cycles8, 99) * 1000:.0f} ms, "

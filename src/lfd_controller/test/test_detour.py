@@ -5,13 +5,13 @@ import math
 
 import numpy as np
 
-from lfd_controller.detour import plan_detour, scan_window
+from lfd_controller.detour import plan_detour, plan_give_way, scan_window
 from lfd_controller.hallway import HALLWAY_SAFETY, HallwayController
 from lfd_controller.hallway_features import HallwayFeatures, PathFollower
 from lfd_controller.rewards import LinearReward
 from robot_common.maps import FREE, OCCUPIED, GridMap
 from robot_common.unicycle import Unicycle
-from robot_sim.hallway import HallwayScene, drive
+from robot_sim.hallway import HallwayScene, Walker, drive
 
 ANGLES = np.linspace(-math.pi, math.pi, 72, endpoint=False)
 
@@ -44,8 +44,7 @@ def test_a_detour_keeps_clear_of_what_the_scan_shows_and_rejoins_the_path_beyond
     follower = PathFollower(scene.path, lookahead=4.0)
     follower.update([4.0, 2.1])
     path = plan_detour(follower, [4.0, 2.1], [seen_from(scene, (4.0, 2.1, 0.0))],
-                       clearance=0.28, grid=scene.grid)
-    assert path is not None
+                       clearance=0.28, grid=scene.grid).path
     dense = np.vstack([np.linspace(a, b, 20) for a, b in zip(path[:-1], path[1:])])
     assert np.hypot(*(dense - [5.0, 2.1]).T).min() >= 0.4 + 0.28 - 0.08   # a cell's slack
     assert np.allclose(path[-1], scene.goal)
@@ -108,3 +107,104 @@ def test_held_up_again_after_a_detour_it_backs_up_unless_something_is_behind():
         assert (controller.detours_, controller.backups_) == (1, 1)
         assert any(c[0] < 0 for c in commands) == backs
         assert controller.status_.startswith("backing up") == backs
+
+
+def test_after_a_recovery_it_turns_in_place_toward_a_waypoint_behind_it():
+    features = HallwayFeatures()
+    weights = dict.fromkeys(features.names, 0.0)
+    weights.update(path_progress=10.0, speed_squared=-10.0, speed_effort=-1.0, turn_effort=-1.0)
+    reward = LinearReward([weights[n] for n in features.names], features)
+    scene = hall([])
+    angles = np.linspace(-math.pi, math.pi, 36, endpoint=False)
+    ranges = np.full(36, 5.0)
+    ranges[[17, 18, 19]] = 0.2          # a wall 0.2 m in front of a robot facing away from the path
+    for wait, turns in ((1.0, True), (0.0, False)):
+        controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=None,
+                                       settings={"max_iter": 2}, grid=scene.grid,
+                                       safety=dict(HALLWAY_SAFETY, replan_after=wait))
+        state = np.array([2.0, 2.1, math.pi, 0.0, 0.0])
+        statuses = []
+        for t in np.arange(0.0, 1.5, 0.1):
+            command = controller.act(state, t, angles, ranges, np.zeros((0, 2)), np.zeros((0, 2)))
+            statuses.append(controller.status_)
+        assert ("turning to the path" in statuses) == turns, statuses
+        if turns:
+            assert command[0] == 0.0 and abs(command[1]) == 1.0
+
+
+def test_along_a_detour_the_waypoint_never_skips_a_stretch_out_of_sight():
+    # a U round something: the far leg is in sight across the gap, the bottom of the U is not
+    path = np.array([[0.0, 0.0], [0.0, -1.0], [1.0, -1.0], [1.0, 0.0], [1.0, 3.0]])
+
+    def visible(point):
+        return not (point[1] < -0.5 and 0.2 < point[0] < 0.8)
+    plain = PathFollower(path, lookahead=4.0).update([0.0, 0.0], visible)
+    close = PathFollower(path, lookahead=4.0, closely=3.0).update([0.0, 0.0], visible)
+    assert plain[0] == 1.0                              # across the gap: the detour's corner cut
+    assert close[0] <= 0.2 + 1e-9 and close[1] <= -0.5  # stops where the U goes out of sight
+
+
+def test_giving_way_goes_aside_away_from_whoever_waits_and_never_toward_them():
+    scene = hall([])
+    follower = PathFollower(scene.path, lookahead=4.0)
+    follower.update([4.0, 2.1])
+    person = np.array([[4.6, 2.1]])
+    spot_path = plan_give_way(follower, [4.0, 2.1], person, [seen_from(scene, (4.0, 2.1, 0.0))],
+                              clearance=0.28, grid=scene.grid)
+    assert spot_path is not None
+    spot = spot_path[-1]
+    assert spot[0] <= 4.0 + 1e-9                        # on the robot's far side from them
+    assert abs(spot[1] - 2.1) >= 0.8 - 1e-9             # off the path they come along
+    assert np.hypot(*(spot - person[0])) >= 1.0 - 1e-9
+    dense = np.vstack([np.linspace(a, b, 20) for a, b in zip(spot_path[:-1], spot_path[1:])])
+    assert np.hypot(*(dense - person[0]).T).min() >= 0.6 - 1e-9
+    # in a hall too narrow to step aside in there is no such spot
+    narrow = hall([], width=1.2)
+    follower = PathFollower(narrow.path, lookahead=4.0)
+    follower.update([4.0, 0.7])
+    assert plan_give_way(follower, [4.0, 0.7], [[4.6, 0.7]],
+                         [seen_from(narrow, (4.0, 0.7, 0.0))], clearance=0.28,
+                         grid=narrow.grid) is None
+
+
+def mouth(length=9.0, wide=4.0, narrow=1.2, at=4.0):
+    """A hall `wide` m wide up to x = `at`, then a corridor `narrow` m wide on its middle (0.1 m
+    cells); the path along the middle from x = 1 m."""
+    scene = hall([], width=wide, length=length)
+    xs, ys = scene.grid.cell_to_world(*np.indices(scene.grid.cells.shape))
+    middle = 0.1 + wide / 2.0
+    scene.grid.cells[(xs > at) & (np.abs(ys - middle) > narrow / 2.0)] = OCCUPIED
+    return scene
+
+
+def meet_at_mouth(give_way: bool):
+    """(reached, times it gave way, distances to the walker while giving way) of a drive
+    into a corridor that a walker comes down head-on, meeting the robot at its mouth."""
+    features = HallwayFeatures()
+    weights = dict.fromkeys(features.names, 0.0)
+    weights.update(path_progress=10.0, speed_squared=-10.0, turn_squared=-1.0, speed_effort=-1.0,
+                   turn_effort=-1.0, wall_proximity=-1.0)
+    reward = LinearReward([weights[n] for n in features.names], features)
+    scene = mouth()
+    # robot_sim's walkers wait for a robot in their way
+    scene.people = [Walker("head_on", "head_on", np.array([[9.5, 2.1], [0.5, 2.1]]), 1.0,
+                           depart=4.0)]
+    controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=None,
+                                   grid=scene.grid, safety=dict(HALLWAY_SAFETY, give_way=give_way))
+    gaps = []
+
+    def policy(state, t, seen):
+        command = controller.act(state, t, seen.angles, seen.ranges, seen.people, seen.velocities)
+        if controller.status_.startswith("giving way") and len(seen.people):
+            gaps.append(float(np.hypot(*(seen.people[0] - state[:2]))))
+        return command
+    result = drive(scene, policy, max_time=60.0)
+    assert result.collision is None
+    return result.reached, controller.give_ways_, gaps
+
+
+def test_a_walker_waiting_for_it_at_a_corridor_mouth_is_given_way_to():
+    reached, give_ways, gaps = meet_at_mouth(True)
+    assert reached and give_ways >= 1
+    assert min(gaps) >= gaps[0] - 0.1                  # away from them, never toward them
+    assert not meet_at_mouth(False)[0]                  # the waiting game, without giving way

@@ -10,14 +10,21 @@ from them and pushed toward the middle) joins the robot to the furthest point of
 to `reach` m on, that the robot fits at; the path from there on is kept.
 """
 import math
-from typing import Optional, Sequence
+from typing import NamedTuple, Optional, Sequence
 
 import numpy as np
 
-from robot_common.gridplan import CellCosts, NoPathError, cheapest_cells, clearance_map
+from robot_common.gridplan import CellCosts, NoPathError, cheapest_cells, clearance_map, path_length
 from robot_common.maps import FREE, OCCUPIED, GridMap
 
-__all__ = ["scan_window", "plan_detour"]
+__all__ = ["Detour", "scan_window", "plan_detour", "plan_give_way"]
+
+
+class Detour(NamedTuple):
+    """A detour's whole new path (N, 2) and the arc length (m) at which it rejoins the old one."""
+
+    path: np.ndarray
+    rejoins: float
 
 
 def scan_window(scans: Sequence, *, centre, half_width: float = 5.0, cell: float = 0.1,
@@ -69,40 +76,97 @@ def _seen_free(laser, angles, ranges, xs, ys, max_range: float) -> np.ndarray:
 def plan_detour(path_follower, position, scans: Sequence, *, clearance: float,
                 reach: float = 5.0, half_width: float = 5.0, cell: float = 0.1,
                 comfort: float = 0.6, wall_cost: float = 2.0,
-                grid: Optional[GridMap] = None) -> Optional[np.ndarray]:
-    """A new path (N, 2) from `position` to the furthest point of the followed path (a
+                grid: Optional[GridMap] = None) -> Optional[Detour]:
+    """A Detour: a new path from `position` to the furthest point of the followed path (a
     hallway_features.PathFollower; from its progress up to `reach` m on, at least 1 m on) that it
     can join through the free cells of scan_window(`scans`, `grid`) kept `clearance` m from the
     others, then the path on from there; None when there is no such point. The robot's own spot
     counts as free: it may stand closer than `clearance` to what holds it up."""
     position = np.asarray(position, float)[:2]
     grid = scan_window(scans, centre=position, half_width=half_width, cell=cell, grid=grid)
+    cost = _step_costs(grid, position, clearance, comfort, wall_cost)
+    for along in np.arange(min(reach, path_follower.length - path_follower.progress), 0.99, -0.25):
+        target = path_follower.point_at(path_follower.progress + along)
+        points = _cell_path(grid, cost, position, target)
+        if points is not None:
+            rest = path_follower.path[path_follower.arc > path_follower.progress + along + 1e-6]
+            return Detour(np.vstack([points, rest]), path_length(points))
+    return None
+
+
+def plan_give_way(path_follower, position, people, scans, *, clearance: float,
+                  reach: float = 2.5, aside: float = 0.8, clear: float = 1.0,
+                  comfort: float = 0.6, wall_cost: float = 2.0, tries: int = 5,
+                  grid: Optional[GridMap] = None) -> Optional[np.ndarray]:
+    """A path (N, 2) from `position` to the nearest spot, within `reach` m, out of the way of
+    `people` (P, 2) who wait for the robot: on the robot's far side from them (it makes way by
+    moving away, not past them), `aside` m from the path's stretch round the robot (3 m back,
+    4 m on: they come along it), `clear` m from each of them, kept `clearance` m from what
+    scan_window(`scans`, `grid`) shows; None when no such spot can be reached (the `tries`
+    nearest are tried; the way there is dearer near them, and one longer than `reach` + 1 m,
+    or coming closer to them than the robot is, does not count)."""
+    position = np.asarray(position, float)[:2]
+    grid = scan_window(scans, centre=position, half_width=reach + 1.0, grid=grid)
+    cost = _step_costs(grid, position, clearance, comfort, wall_cost)
+    xs, ys = grid.cell_to_world(*np.indices(cost.shape))
+    people = np.asarray(people, float).reshape(-1, 2)
+    towards = people.mean(axis=0) - position if len(people) else np.zeros(2)
+    spots = np.isfinite(cost) & (np.hypot(xs - position[0], ys - position[1]) <= reach) & (
+        (xs - position[0]) * towards[0] + (ys - position[1]) * towards[1] <= 0.0)
+    stretch = [path_follower.point_at(s) for s in np.arange(
+        path_follower.progress - 3.0, path_follower.progress + 4.0, 0.1)]
+    for points, room in ((stretch, aside), (people, clear)):
+        for x, y in points:
+            spots &= np.hypot(xs - x, ys - y) >= room
+    if len(people):     # the way there keeps off them: dearer the nearer it comes
+        apart = np.min([np.hypot(xs - x, ys - y) for x, y in people], axis=0)
+        cost = cost + 2.0 * wall_cost * np.clip((clear - apart) / clear, 0.0, 1.0)
+    order = np.argsort(np.hypot(xs[spots] - position[0], ys[spots] - position[1]))
+    for index in order[:tries]:
+        points = _cell_path(grid, cost, position, (xs[spots][index], ys[spots][index]))
+        if points is not None and path_length(points) <= reach + 1.0 and not (
+                len(people) and _nearest(points, people) < _nearest(position[None], people)
+                - grid.resolution):
+            return points
+    return None
+
+
+def _nearest(points: np.ndarray, people: np.ndarray) -> float:
+    """The closest any of `points` (N, 2) and the straight lines between them come to `people`
+    (P, 2)."""
+    dense = np.vstack([np.linspace(a, b, 5) for a, b in zip(points[:-1], points[1:])]) \
+        if len(points) > 1 else points
+    return float(np.hypot(*(dense[:, None, :] - people[None, :, :]).transpose(2, 0, 1)).min())
+
+
+def _step_costs(grid: GridMap, position, clearance: float, comfort: float,
+                wall_cost: float) -> np.ndarray:
+    """Each cell's cost to step on: infinite nearer than `clearance` to an obstacle, dearer
+    within `comfort` of one; the robot's own spot (within `clearance` of `position`) free."""
     room = clearance_map(grid, max(comfort, clearance))
     cost = np.where(room >= clearance, 1.0 + wall_cost * np.clip(
         (comfort - room) / comfort, 0.0, 1.0), np.inf)
-    rows, cols = np.indices(cost.shape)
-    xs, ys = grid.cell_to_world(rows, cols)
+    xs, ys = grid.cell_to_world(*np.indices(cost.shape))
     around = np.hypot(xs - position[0], ys - position[1]) <= clearance
     cost[around & (grid.cells == FREE)] = 1.0 + wall_cost
-    start = grid.world_to_cell(*position)
-    if not (grid.inside(*start) and np.isfinite(cost[start])):
+    return cost
+
+
+def _cell_path(grid: GridMap, cost: np.ndarray, start_point, end_point) -> Optional[np.ndarray]:
+    """The cheapest path (thinned, its ends the two points) between two points on `cost`, or
+    None when either end is off the free cells or nothing joins them."""
+    start, goal = grid.world_to_cell(*start_point), grid.world_to_cell(*end_point)
+    if not all(grid.inside(*cell) and np.isfinite(cost[cell]) for cell in (start, goal)):
         return None
-    for along in np.arange(min(reach, path_follower.length - path_follower.progress), 0.99, -0.25):
-        target = path_follower.point_at(path_follower.progress + along)
-        goal = grid.world_to_cell(*target)
-        if not (grid.inside(*goal) and np.isfinite(cost[goal])):
-            continue
-        try:
-            cells, _ = cheapest_cells(CellCosts(cost[None]), tuple(map(int, start)),
-                                      tuple(map(int, goal)))
-        except NoPathError:
-            continue
-        rows_, cols_ = np.array([c[0] for c in cells]), np.array([c[1] for c in cells])
-        points = np.column_stack(grid.cell_to_world(rows_, cols_))
-        points[0], points[-1] = position, target
-        rest = path_follower.path[path_follower.arc > path_follower.progress + along + 1e-6]
-        return np.vstack([_thinned(points), rest])
-    return None
+    try:
+        cells, _ = cheapest_cells(CellCosts(cost[None]), tuple(map(int, start)),
+                                  tuple(map(int, goal)))
+    except NoPathError:
+        return None
+    rows, cols = np.array([c[0] for c in cells]), np.array([c[1] for c in cells])
+    points = np.column_stack(grid.cell_to_world(rows, cols))
+    points[0], points[-1] = start_point, end_point
+    return _thinned(points)
 
 
 def _thinned(points: np.ndarray, step: int = 3) -> np.ndarray:

@@ -26,8 +26,9 @@ from threadpoolctl import threadpool_limits
 
 from lfd_controller.cioc import LinearCIOC
 from lfd_controller.demos import Demonstration
-from lfd_controller.detour import plan_detour
+from lfd_controller.detour import plan_detour, plan_give_way
 from lfd_controller.errors import LfdError
+from lfd_controller.give_way import GivingWay, people_holding
 from lfd_controller.hallway_features import (
     HALLWAY_SIGNS,
     HallwayFeatures,
@@ -65,7 +66,7 @@ HALLWAY_DRIVING = {"horizon": 12, "plan_dt": 0.4, "terminal": 0.0, "spread_seeds
                    "detour": 0.9, "unstall": 2.0}
 HALLWAY_SAFETY = {"robot_radius": 0.18, "person_radius": 0.25, "barrier_margin": 0.1,
                   "stop_margin": 0.05, "blocked_after": 20.0, "lookahead": 4.0,
-                  "replan_after": 4.0}
+                  "replan_after": 4.0, "give_way": True}
 WINDOW, STRIDE = 40, 20
 # The safety stop looks this far (m) along the command beyond the stopping distance, and lets
 # through moves that bring a point inside its margin no more than this much (m) closer.
@@ -80,9 +81,17 @@ PROGRESS_PATIENCE = 3.0
 # nothing is behind it (nav2's BackUp recovery): someone standing close in front - who may be
 # waiting for the robot to make way - gets room to walk on.
 BACKUP_SPEED, BACKUP_TIME = 0.15, 2.0
+# After a recovery (a detour or backing up) a robot whose local waypoint lies more than
+# TURN_START rad off its heading first turns in place toward it, at up to TURN_RATE rad/s,
+# until within TURN_DONE rad (nav2's rotation shim): a detour often starts behind the robot,
+# and the learned reward turns slowly in tight spots.
+TURN_START, TURN_DONE, TURN_RATE = math.radians(60.0), math.radians(20.0), 1.0
 # The scans a detour is planned on: one every SCAN_EVERY s over the last SCAN_MEMORY s (what the
 # robot saw on its way in: a cart hides what is behind it from where the robot stands).
 SCAN_EVERY, SCAN_MEMORY = 0.5, 10.0
+# The tracked people kept as often, for this long (s): who walked up to the robot and stopped
+# (give_way.people_holding).
+PEOPLE_MEMORY = 12.0
 # Share of the cycle budget, counted from the cycle's start (the task from the scan and people
 # included), after which the planner starts nothing new; the rest is headroom for a busy machine
 # (on 2 shared cores a cycle can lose tens of ms to other processes).
@@ -209,16 +218,18 @@ class HallwayController:
         self.planner = RecedingHorizonController(planned, self.model, budget=budget,
                                                  **self.settings)
         self.status_, self.held_since_ = "following", None
-        self.detours_ = self.backups_ = 0
+        self.detours_ = self.backups_ = self.give_ways_ = 0
+        self._giving_way: Optional[GivingWay] = None
         self._left, self._getting_on, self._tried = math.inf, 0.0, 0.0
-        self._recoveries, self._backing_until = 0, -math.inf
+        self._recoveries, self._backing_until, self._turning = 0, -math.inf, False
         self._scans, self._scanned = deque(maxlen=int(SCAN_MEMORY / SCAN_EVERY)), -math.inf
+        self._seen_people = deque(maxlen=int(PEOPLE_MEMORY / SCAN_EVERY))
 
     @property
     def goal(self) -> np.ndarray:
         return self.follower.path[-1]
 
-    def _detour(self, state, t: float, angles, ranges) -> bool:
+    def _detour(self, state, t: float, angles, ranges, people, velocities) -> bool:
         """Keep the scans and the progress clocks; after `replan_after` s without PROGRESS_STEP m
         of progress (and as often again while none comes) follow a detour (detour.plan_detour,
         on the floor map and the scans) or, every other time, back up first. True when the
@@ -226,6 +237,7 @@ class HallwayController:
         laser = laser_pose(state, self.laser_offset)
         if t - self._scanned >= SCAN_EVERY:
             self._scans.append((laser, np.asarray(angles, float), np.asarray(ranges, float)))
+            self._seen_people.append((np.asarray(people, float), np.asarray(velocities, float)))
             self._scanned = t
         left = self.follower.length - self.follower.progress
         if left < self._left - PROGRESS_STEP:
@@ -235,17 +247,31 @@ class HallwayController:
         if wait <= 0 or t - self._tried < wait:
             return False
         self._tried, self._recoveries = t, self._recoveries + 1
+        scans = list(self._scans)[:-1] + [(laser, angles, ranges)]
+        clearance = self.safety["robot_radius"] + self.safety["stop_margin"] + DETOUR_ROOM
+        holding = people_holding(state, people, velocities, self._seen_people)
+        if self.safety.get("give_way", True) and holding.any():    # someone waits for it
+            spot = plan_give_way(self.follower, state[:2], np.asarray(people)[holding], scans,
+                                 clearance=clearance, grid=self.grid)
+            if spot is not None:
+                self._giving_way = GivingWay(spot, np.array(state[:2], float), t)
+                self.give_ways_ += 1
+                return False
         if self._recoveries % 2 == 0:       # every other time held up: back up first
             self._backing_until, self.backups_ = t + BACKUP_TIME, self.backups_ + 1
+            self._turning = True
             return False
-        path = plan_detour(self.follower, state[:2],
-                           list(self._scans)[:-1] + [(laser, angles, ranges)],
-                           clearance=self.safety["robot_radius"] + self.safety["stop_margin"]
-                           + DETOUR_ROOM, grid=self.grid)
-        if path is None:
+        return self._rejoin(state, scans, clearance)
+
+    def _rejoin(self, state, scans, clearance: float) -> bool:
+        """Follow a detour from where the robot is back to its path; True when found."""
+        detour = plan_detour(self.follower, state[:2], scans, clearance=clearance, grid=self.grid)
+        if detour is None:
             return False
-        self.task.follower = self.follower = PathFollower(path, lookahead=self.follower.lookahead)
+        self.task.follower = self.follower = PathFollower(
+            detour.path, lookahead=self.follower.lookahead, closely=detour.rejoins)
         self._left, self.detours_ = self.follower.length, self.detours_ + 1
+        self._turning = True
         return True
 
     @property
@@ -261,16 +287,25 @@ class HallwayController:
             return np.zeros(2)
         started = time.perf_counter()
         task = self.task(state, t, angles, ranges, people, velocities)
-        if self._detour(state, t, angles, ranges):
+        if self._giving_way is None and self._detour(state, t, angles, ranges, people, velocities):
             task = self.task(state, t, angles, ranges, people, velocities)
         if t - self._getting_on >= PROGRESS_PATIENCE * self.safety["blocked_after"]:
             return self._blocked(t - self._getting_on)
+        if self._giving_way is not None:
+            command = self._give_way(state, t, angles, ranges, people)
+            if command is not None:
+                return command
+            task = self.task(state, t, angles, ranges, people, velocities)
         if t < self._backing_until:
             command = np.array([-BACKUP_SPEED, 0.0])
             if self._too_close(angles, ranges, state[3], command) is None:
                 self.held_since_, self.status_ = None, "backing up: held up"
                 return command
             self._backing_until = -math.inf
+        if self._turning:
+            command = self._turn_toward(state, t, task.waypoint)
+            if command is not None:
+                return command
         command = self.planner.act(state, t, task, started=started)
         reason = self._too_close(angles, ranges, state[3], command)
         moving = abs(state[3]) > 0.05 or abs(command[0]) > 0.05
@@ -285,6 +320,39 @@ class HallwayController:
             return np.array([0.0, float(command[1])])
         self.status_ = "waiting"
         return command
+
+    def _give_way(self, state, t: float, angles, ranges, people) -> Optional[np.ndarray]:
+        """The command while giving way (the safety stop applies), or None once done: then
+        back to the path by a detour from where the robot is."""
+        command = self._giving_way.command(state, t, people)
+        self._tried, self.held_since_ = t, None
+        if command is None:
+            self._giving_way = None
+            scans = list(self._scans) + [(laser_pose(state, self.laser_offset), angles, ranges)]
+            self._rejoin(state, scans, self.safety["robot_radius"] + self.safety["stop_margin"]
+                         + DETOUR_ROOM)
+            self._turning = True
+            return None
+        if self._too_close(angles, ranges, state[3], command) is not None:
+            command = np.array([0.0, float(command[1])])
+        moving = self._giving_way.arrived is None
+        self.status_ = ("giving way: to a spot out of the way" if moving
+                        else "giving way: waiting for people to pass")
+        return command
+
+    def _turn_toward(self, state, t: float, waypoint) -> Optional[np.ndarray]:
+        """After a recovery: the command turning in place toward `waypoint` while it is more
+        than TURN_START (once started, TURN_DONE) rad off the heading, else None (and no more
+        turning until the next recovery). Turning holds the recovery clock."""
+        offset = np.asarray(waypoint, float) - state[:2]
+        bearing = math.remainder(math.atan2(offset[1], offset[0]) - state[2], 2.0 * math.pi)
+        limit = TURN_DONE if self.status_ == "turning to the path" else TURN_START
+        if abs(bearing) <= limit:
+            self._turning = False
+            return None
+        self._tried, self.held_since_ = t, None
+        self.status_ = "turning to the path"
+        return np.array([0.0, math.copysign(min(TURN_RATE, 2.0 * abs(bearing)), bearing)])
 
     def _blocked(self, held: float) -> np.ndarray:
         self.status_ = (f"blocked: held up {held:.0f} s at {self.follower.progress:.1f} of "

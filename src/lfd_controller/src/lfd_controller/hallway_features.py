@@ -167,9 +167,13 @@ class PathFollower:
     """Progress along a path (N, 2) and the local waypoint `lookahead` m ahead of it.
 
     The progress never goes back by more than `lookahead` (a path that loops past itself is
-    followed in order) and is searched only `window` m ahead of the last one."""
+    followed in order) and is searched only `window` m ahead of the last one. Up to arc length
+    `closely` (a detour the robot planned itself, kept clear of everything) the waypoint never
+    skips a stretch out of sight: a door seen through a gap too narrow to drive would
+    otherwise cut the detour's corner."""
 
-    def __init__(self, path, *, lookahead: float = 1.5, window: float = 4.0):
+    def __init__(self, path, *, lookahead: float = 1.5, window: float = 4.0,
+                 closely: float = 0.0):
         self.path = np.asarray(path, float).reshape(-1, 2)
         if len(self.path) < 1:
             raise LfdError("a path needs at least one point")
@@ -178,7 +182,7 @@ class PathFollower:
         steps = np.hypot(*np.diff(self.path, axis=0).T) if len(self.path) > 1 else np.zeros(0)
         self.arc = np.concatenate([[0.0], np.cumsum(steps)])
         self.lookahead, self.window = float(lookahead), float(window)
-        self.progress = 0.0
+        self.closely, self.progress = float(closely), 0.0
 
     @property
     def length(self) -> float:
@@ -200,9 +204,21 @@ class PathFollower:
         if len(near):
             self.progress = max(self.progress - self.lookahead, self._nearest(position, near))
         ahead = self.lookahead
+        if visible is not None and self.progress < self.closely:
+            ahead = self._in_sight_throughout(visible)
         while visible is not None and ahead > 0.5 and not visible(self.point_at(self.progress + ahead)):
             ahead -= 0.25
         return self.point_at(self.progress + ahead)
+
+    def _in_sight_throughout(self, visible) -> float:
+        """How far on (at least 0.5 m, at most `lookahead`) the path up to arc `closely` stays
+        in sight; past `closely` the plain rule takes over."""
+        ahead = 0.5
+        while ahead < self.lookahead and self.progress + ahead < self.closely:
+            if not visible(self.point_at(self.progress + ahead + 0.25)):
+                return ahead
+            ahead += 0.25
+        return self.lookahead
 
     def _nearest(self, position, near) -> float:
         """Arc length of the point nearest `position` on the segments starting at `near`."""

@@ -114,6 +114,9 @@ class RewardControllerParams(NodeConfig):
                                      "a detour planned on ~map and the scan round what blocks "
                                      "the path, the next time back up 0.3 m first (if nothing "
                                      "is behind), and so on; 0: never")
+    give_way: bool = param(True, "path mode: held up by someone standing close in front (who "
+                                 "may be waiting for the robot), first move aside out of their "
+                                 "way and wait for them to pass")
     laser_offset: float = param(0.1, "path mode: the laser frame's distance ahead of the base (m)")
     person_radius: float = param(0.25, "path mode: radius of a tracked person (m)")
     barrier_margin: float = param(0.1, "path mode: fixed barrier this far (m) beyond touching a "
@@ -159,7 +162,7 @@ class RewardControllerParams(NodeConfig):
         return {"robot_radius": self.robot_radius, "person_radius": self.person_radius,
                 "barrier_margin": self.barrier_margin, "stop_margin": self.safety_margin,
                 "blocked_after": self.blocked_after, "lookahead": self.lookahead,
-                "replan_after": self.replan_after}
+                "replan_after": self.replan_after, "give_way": self.give_way}
 
     def limits(self) -> UnicycleLimits:
         """The robot's limits (ModelError when one is not positive)."""

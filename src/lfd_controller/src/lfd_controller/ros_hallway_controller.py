@@ -25,7 +25,8 @@ __all__ = ["HallwayControllerNode"]
 
 LEVELS = {"following": DiagnosticStatus.OK, "arrived": DiagnosticStatus.OK,
           "waiting": DiagnosticStatus.OK, "stopped": DiagnosticStatus.WARN,
-          "backing up": DiagnosticStatus.WARN,
+          "backing up": DiagnosticStatus.WARN, "turning to the path": DiagnosticStatus.WARN,
+          "giving way": DiagnosticStatus.WARN,
           "blocked": DiagnosticStatus.ERROR, "no path": DiagnosticStatus.WARN}
 
 
@@ -37,6 +38,7 @@ class HallwayControllerNode:
       1/rate), ~max_iter, the limits, ~robot_radius, ~goal_tolerance, ~frame, ~enabled and the
       path mode's ~lookahead (4.0 m), ~safety_margin (0.05 m), ~blocked_after (20 s),
       ~replan_after (4 s: held up this long, a detour planned on the map and the scan),
+      ~give_way (true: held up by someone who stopped in front, first move out of their way),
       ~laser_offset (0.1 m), ~person_radius (0.25 m), ~barrier_margin (0.1 m).
     Topics in: odom (nav_msgs/Odometry, pose in the path's frame), path (nav_msgs/Path: the
       global plan, e.g. move_base's; followed from its first pose), goal (geometry_msgs/
@@ -46,7 +48,10 @@ class HallwayControllerNode:
     Topics out: cmd_vel (geometry_msgs/Twist), ~cycle_time (std_msgs/Float64), /diagnostics
       (diagnostic_msgs/DiagnosticArray, name "reward_controller: path"): OK following (progress,
       waypoint) / arrived, WARN stopped (zero speed, turning allowed: what the scan shows inside
-      the margin on its way), backing up (held up again after a detour) or no path, ERROR
+      the margin on its way), backing up (held up again after a detour), turning to the path
+      (in place, after a detour or backing up, toward a waypoint behind it), giving way (to a
+      spot out of the way, or waiting there, of someone who stopped for the robot) or no path,
+      ERROR
       blocked (stood still ~blocked_after s, or no 0.3 m of progress for 3 x that, detours and
       backing up tried: the robot stays stopped until a new path).
     Services: ~enable (std_srvs/SetBool).
@@ -171,7 +176,8 @@ class HallwayControllerNode:
                            KeyValue("progress_m", f"{follower.progress:.2f}"),
                            KeyValue("length_m", f"{follower.length:.2f}"),
                            KeyValue("detours", str(controller.detours_)),
-                           KeyValue("backing_up", str(controller.backups_))]
+                           KeyValue("backing_up", str(controller.backups_)),
+                           KeyValue("giving_way", str(controller.give_ways_))]
         array = DiagnosticArray(status=[item])
         array.header.stamp = rospy.Time.now()
         self.diagnostics.publish(array)

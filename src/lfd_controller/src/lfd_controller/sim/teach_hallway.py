@@ -86,8 +86,8 @@ def scenes(grid: GridMap, name: str, seeds: Sequence[int], people: Optional[int]
 def drive_learner(scene: HallwayScene, reward, budget: Optional[float] = 0.1,
                   margin: float = HALLWAY_SAFETY["barrier_margin"]) -> Dict:
     """drive_figures of the path-mode controller driving `reward` through `scene` (barrier
-    `margin` m beyond touching, cycle `budget` s or None: unlimited) plus its cycle times and
-    last status."""
+    `margin` m beyond touching, cycle `budget` s or None: unlimited) plus its cycle times, last
+    status and how often it recovered (detours, backing up, giving way)."""
     controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=budget,
                                    safety=dict(HALLWAY_SAFETY, barrier_margin=margin),
                                    grid=scene.grid)
@@ -101,6 +101,8 @@ def drive_learner(scene: HallwayScene, reward, budget: Optional[float] = 0.1,
     figures = drive_figures(drive(scene, policy))
     figures["cycles"] = cycles
     figures["status"] = controller.status_
+    figures["recoveries"] = {"detours": controller.detours_, "backing_up": controller.backups_,
+                             "giving_way": controller.give_ways_}
     return figures
 
 

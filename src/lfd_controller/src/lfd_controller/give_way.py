@@ -1,0 +1,85 @@
+"""Making way for people who wait for the robot (no ROS).
+
+People who meet a robot in a door or a narrow hall often stop and wait for it to move; a robot
+that then waits for them, or backs up along their way, is in a waiting game nobody wins. A
+person who walked up and stopped close in front of a held-up robot (`people_holding`) is taken
+as waiting for it:
+the robot drives to the nearest spot out of the way of people coming along its path
+(detour.plan_give_way), waits there until the spot where it was held is clear (or `WAIT` s),
+and then rejoins its path (the controller plans a detour back to it).
+"""
+import math
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+__all__ = ["people_holding", "GivingWay"]
+
+# A person standing (slower than STILL m/s) within HOLD_REACH m of the robot, in front of it,
+# who was walking (a tracked person at WALKING m/s or more within ARRIVED m of them) in the
+# last seconds the caller keeps, holds it up: they stopped for the robot (people standing in a
+# group all along do not wait for anybody). Giving way drives at SPEED m/s (turning in place
+# first when the way on is more than TURN rad off), for at most DRIVE s, then waits up to WAIT
+# s for the spot where the robot was held to clear (nobody within CLEAR m of it).
+HOLD_REACH, STILL, WALKING, ARRIVED = 1.2, 0.2, 0.4, 1.0
+SPEED, TURN, DRIVE = 0.2, math.radians(60.0), 10.0
+WAIT, CLEAR = 6.0, 1.0
+
+
+def people_holding(state, people, velocities, earlier=(), *, reach: float = HOLD_REACH
+                   ) -> np.ndarray:
+    """Which of `people` (P, 2) stand within `reach` m in front of the robot at `state` (x, y,
+    yaw, ...) and had walked up: some earlier report in `earlier` ((people, velocities) pairs,
+    tracks have no names) has someone walking within ARRIVED m of where they stand."""
+    people = np.asarray(people, float).reshape(-1, 2)
+    speeds = np.hypot(*np.asarray(velocities, float).reshape(-1, 2).T)
+    offset = people - np.asarray(state[:2], float)
+    ahead = offset @ np.array([math.cos(state[2]), math.sin(state[2])]) > 0.0
+    walked = np.zeros(len(people), bool)
+    for before, moving in earlier:
+        before = np.asarray(before, float).reshape(-1, 2)
+        walking = before[np.hypot(*np.asarray(moving, float).reshape(-1, 2).T) >= WALKING]
+        for point in walking:
+            walked |= np.hypot(*(people - point).T) <= ARRIVED
+    return (np.hypot(*offset.T) <= reach) & ahead & (speeds < STILL) & walked
+
+
+@dataclass
+class GivingWay:
+    """One act of giving way: `path` (N, 2) to the spot, `held_at` (x, y) where the robot was
+    held up, from time `since`."""
+
+    path: np.ndarray
+    held_at: np.ndarray
+    since: float
+    arrived: Optional[float] = None
+
+    def command(self, state, t: float, people) -> Optional[np.ndarray]:
+        """The command this cycle: toward the spot (pure pursuit), then zero while waiting;
+        None when done (the held spot is clear, or the time is up)."""
+        position = np.asarray(state[:2], float)
+        if self.arrived is None and (np.hypot(*(self.path[-1] - position)) < 0.15
+                                     or t - self.since >= DRIVE):
+            self.arrived = t
+        if self.arrived is None:
+            return self._toward(state)
+        people = np.asarray(people, float).reshape(-1, 2)
+        crowded = len(people) and np.hypot(*(people - self.held_at).T).min() < CLEAR
+        if t - self.arrived >= WAIT or (t - self.arrived >= 1.0 and not crowded):
+            return None
+        return np.zeros(2)
+
+    def _toward(self, state) -> np.ndarray:
+        """Pure pursuit of the first path point 0.3 m or more away (the spot at the end)."""
+        position = np.asarray(state[:2], float)
+        distances = np.hypot(*(self.path - position).T)
+        later = np.flatnonzero((np.arange(len(distances)) >= np.argmin(distances))
+                               & (distances >= 0.3))
+        target = self.path[later[0]] if len(later) else self.path[-1]
+        bearing = math.remainder(math.atan2(target[1] - position[1], target[0] - position[0])
+                                 - state[2], 2.0 * math.pi)
+        turn = float(np.clip(2.0 * bearing, -1.0, 1.0))
+        if abs(bearing) > TURN:
+            return np.array([0.0, turn])
+        return np.array([SPEED * math.cos(bearing), turn])
