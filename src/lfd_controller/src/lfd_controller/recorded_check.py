@@ -328,7 +328,10 @@ class RecordedVerdict:
                     c["success"] and c["time"] <= TIME_FACTOR * p["time"]))]
 
     def failure_lines(self) -> List[str]:
+        """Why the reward is refused, the failing drives last ([] when accepted)."""
         failing = self.failing_drives()
+        if self.accepted:
+            return []
         return list(self.verdict["failures"]) + (
             [f"failing drives: {', '.join(failing)}"] if failing else [])
 
