@@ -83,13 +83,14 @@ def test_a_reward_going_backwards_is_refused_and_the_refusal_names_the_drive(lea
     assert "--accept-mismatch" in message
 
 
-def standing_recording(scans, people=()):
-    """A robot standing at the origin facing +x for 1 s, with these scans and people reports."""
+def standing_recording(scans, people=(), goal=(3.0, 0.0)):
+    """A robot standing at the origin facing +x for 1 s, with these scans and people reports,
+    its path straight to `goal`."""
     steps = 10
     states = np.zeros((steps, 5))
     demo = Demonstration(hallway_scenario(), np.zeros(5), np.zeros((steps, 2)), 0.0, states,
                          "person")
-    return demo, RecordedSensors(np.array([[0.0, 0.0], [3.0, 0.0]]), list(scans), list(people))
+    return demo, RecordedSensors(np.array([[0.0, 0.0], goal]), list(scans), list(people))
 
 
 def wall_and_person_scan(t):
@@ -149,6 +150,16 @@ def test_touching_a_replayed_person_counts_only_when_the_robot_drives_into_them(
     assert world.contact(np.array([0.0, 0.0, 0.0, 0.0, 0.0]), 0.5) is None
     assert world.contact(np.array([0.0, 0.0, 0.0, 0.1, 0.0]), 0.5) is None
     assert world.person_gap(np.array([0.0, 0.0, 0.0, 0.0, 0.0]), 0.5) == pytest.approx(-0.03)
+
+
+def test_recordings_where_the_person_never_arrived_check_nothing_and_are_refused(learned):
+    _, reward = learned
+    demo, sensors = standing_recording([wall_and_person_scan(0.1 * k) for k in range(10)],
+                                       goal=(1.0, 0.0))     # 1 m on, in the open: never reached
+    checked = check_recorded(reward, [(demo, sensors)], names=["standing.bag"])
+    assert not checked.person[0]["success"]
+    assert not checked.accepted
+    assert "nothing to check the controller against" in str(RewardNotAcceptedError(checked))
 
 
 def test_scans_from_outside_the_drive_are_a_clear_error_naming_the_drive():

@@ -30,8 +30,9 @@ recording itself (a Demonstration plus hallway_recording.RecordedSensors):
     or on a person's disc driving into them) or runs out of time: TIME_FACTOR x the
     person's time + TIME_EXTRA s;
   * the verdict (`check_recorded`): hallway.hallway_acceptance on the person's and the
-    controller's figures (refused only where the controller fails where the person succeeded),
-    with a line for each drive.
+    controller's figures (refused only where the controller fails where the person succeeded;
+    refused too when no recorded drive succeeded: nothing was checked), with a line for each
+    drive.
 
 The check is conservative where the recording is silent (unknown space is solid) and blind to
 what it never recorded (untracked people, doors opened later, people's answers to the robot).
@@ -396,5 +397,9 @@ def check_recorded(reward, drives: Sequence[Tuple[Demonstration, RecordedSensors
             progress(f"acceptance {index + 1}/{len(drives)}: {name}: person {_outcome(mine)}, "
                      f"controller {_outcome(controller[-1])} "
                      f"({controller[-1]['cpu']:.1f} CPU-s)")
-    return RecordedVerdict(hallway_acceptance(person, controller), margin, names, person,
-                           controller)
+    verdict = hallway_acceptance(person, controller)
+    if not any(p["success"] for p in person):       # nothing to hold the controller to
+        verdict = {"accepted": False, "failures": [
+            f"no recorded drive ends within {SUCCESS_TOLERANCE} m of its path's end without "
+            "touching anything: nothing to check the controller against"]}
+    return RecordedVerdict(verdict, margin, names, person, controller)
