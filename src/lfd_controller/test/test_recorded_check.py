@@ -152,6 +152,15 @@ def test_touching_a_replayed_person_counts_only_when_the_robot_drives_into_them(
     assert world.person_gap(np.array([0.0, 0.0, 0.0, 0.0, 0.0]), 0.5) == pytest.approx(-0.03)
 
 
+def test_a_wall_is_touched_when_an_occupied_cell_centre_is_within_the_robot_radius():
+    cells = np.full((40, 40), FREE, np.int8)
+    cells[:, 30] = OCCUPIED                             # x in [1.0, 1.1): centres at x = 1.05
+    world = RecordedWorld(GridMap(cells, 0.1, (-2.0, -2.0, 0.0)), ReplayedPeople([]))
+    assert world.wall_gap(np.array([0.85, 0.05, 0.0, 0.0, 0.0])) == pytest.approx(0.2)
+    assert world.contact(np.array([0.85, 0.05, 0.0, 0.0, 0.0]), 0.0) is None
+    assert world.contact(np.array([0.9, 0.05, 0.0, 0.0, 0.0]), 0.0) == "wall"      # 0.15 m
+
+
 def test_recordings_where_the_person_never_arrived_check_nothing_and_are_refused(learned):
     _, reward = learned
     demo, sensors = standing_recording([wall_and_person_scan(0.1 * k) for k in range(10)],

@@ -18,17 +18,17 @@ recording itself (a Demonstration plus hallway_recording.RecordedSensors):
     where the recorded one was).
     Only people the recording tracked exist;
   * the person's own figures from the recording (`recorded_figures`: success = the drive ends
-    within SUCCESS_TOLERANCE of the path's end without touching an occupied cell or a person
-    disc; time to the goal; closest approach edge to edge to a replayed person) and the barrier
-    margin from them (hallway.room_margin);
+    within SUCCESS_TOLERANCE of the path's end without touching anything, as below; time to
+    the goal; closest approach edge to edge to a replayed person) and the barrier margin from
+    them (hallway.room_margin);
   * the controller's closed-loop drive (`controller_drive`): HallwayController with the node's
     settings (params.RewardControllerParams with the reward's barrier margin, no cycle budget:
     the verdict does not depend on how busy the machine is) from the demonstration's start
     along the recorded path, a Unicycle stepping it, scans ray-cast from the laser
     (`laser_offset` m ahead of the base) on the map plus the people's discs at the recording's
-    beam angles, until it reaches the goal, touches something (robot disc on an occupied cell,
-    or on a person's disc driving into them) or runs out of time: TIME_FACTOR x the
-    person's time + TIME_EXTRA s;
+    beam angles, until it reaches the goal, touches something (an occupied cell's centre within
+    the robot's radius - the returns lie within half a cell of it -, or a person's disc it
+    drives into) or runs out of time: TIME_FACTOR x the person's time + TIME_EXTRA s;
   * the verdict (`check_recorded`): hallway.hallway_acceptance on the person's and the
     controller's figures (refused only where the controller fails where the person succeeded;
     refused too when no recorded drive succeeded: nothing was checked), with a line for each
@@ -187,16 +187,15 @@ class RecordedWorld:
             distance_transform_edt(~occupied, return_distances=False, return_indices=True)
 
     def wall_gap(self, state) -> float:
-        """Distance (m) from the robot's centre to the nearest occupied cell's square (inf:
-        none; outside the map: 0)."""
+        """Distance (m) from the robot's centre to the centre of the nearest occupied cell (the
+        returns that made it lie within half a cell of it; inf: none; outside the map: 0)."""
         if self._nearest is None:
             return math.inf
         row, col = self.grid.world_to_cell(float(state[0]), float(state[1]))
         if not self.grid.inside(row, col):
             return 0.0
         x, y = self.grid.cell_to_world(*self._nearest[:, row, col])
-        half = 0.5 * self.grid.resolution
-        return math.hypot(max(abs(x - state[0]) - half, 0.0), max(abs(y - state[1]) - half, 0.0))
+        return math.hypot(x - state[0], y - state[1])
 
     def person_gap(self, state, t: float) -> float:
         """Distance (m) between the robot's edge and the nearest replayed person's (inf: nobody)."""
@@ -207,11 +206,12 @@ class RecordedWorld:
         return centre - self.robot_radius - self.person_radius
 
     def contact(self, state, t: float) -> Optional[str]:
-        """"wall" (an occupied cell), "person" or None: what the robot at `state` touches. A
-        replayed person counts only when the robot drives into them: its last step (dt at its
-        speed) brought it onto them, closing in at over CLOSING m/s and faster than they close
-        in on it (replayed people walk on into a robot that is not where the recorded one was,
-        where real people would have waited or stepped round it)."""
+        """"wall" (an occupied cell's centre within the robot's radius), "person" or None: what
+        the robot at `state` touches. A replayed person counts only when the robot drives into
+        them: its last step (dt at its speed) brought it onto them, closing in at over CLOSING
+        m/s and faster than they close in on it (replayed people walk on into a robot that is
+        not where the recorded one was, where real people would have waited or stepped round
+        it)."""
         if self.wall_gap(state) < self.robot_radius:
             return "wall"
         positions, velocities = self.people.at(t)
