@@ -35,6 +35,15 @@ def cup(x=5.0, middle=2.1):
     return bottom + sides
 
 
+def progress_reward(**weights):
+    """A hallway reward for progress along the path (10) against squared speed (-10), plus
+    `weights` by feature name; every other feature 0."""
+    features = HallwayFeatures()
+    named = dict.fromkeys(features.names, 0.0)
+    named.update(path_progress=10.0, speed_squared=-10.0, **weights)
+    return LinearReward([named[n] for n in features.names], features)
+
+
 def seen_from(scene, pose):
     return (tuple(pose), ANGLES, scene.scan(np.asarray(pose, float), 0.0, ANGLES, 8.0))
 
@@ -70,13 +79,10 @@ def test_without_a_map_only_what_the_scan_has_seen_free_is_free():
 
 
 def test_the_controller_held_up_in_a_cup_of_clutter_drives_round_it_to_the_goal():
-    features = HallwayFeatures()
-    weights = dict.fromkeys(features.names, 0.0)
-    weights.update(path_progress=10.0, speed_squared=-10.0, turn_squared=-1.0, speed_effort=-1.0,
-                   turn_effort=-1.0, wall_proximity=-1.0)
+    reward = progress_reward(turn_squared=-1.0, speed_effort=-1.0, turn_effort=-1.0,
+                             wall_proximity=-1.0)
     scene = hall(cup(), length=8.0)
-    controller = HallwayController(LinearReward([weights[n] for n in features.names], features),
-                                   scene.path, Unicycle(0.1), budget=None, grid=scene.grid,
+    controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=None, grid=scene.grid,
                                    safety=dict(HALLWAY_SAFETY))
 
     def policy(state, t, seen):
@@ -88,10 +94,7 @@ def test_the_controller_held_up_in_a_cup_of_clutter_drives_round_it_to_the_goal(
 
 
 def test_held_up_again_after_a_detour_it_backs_up_unless_something_is_behind():
-    features = HallwayFeatures()
-    weights = dict.fromkeys(features.names, 0.0)
-    weights.update(path_progress=10.0, speed_squared=-10.0, speed_effort=-1.0, turn_effort=-1.0)
-    reward = LinearReward([weights[n] for n in features.names], features)
+    reward = progress_reward(speed_effort=-1.0, turn_effort=-1.0)
     scene = hall([])
     angles = np.linspace(-math.pi, math.pi, 36, endpoint=False)
     state = np.array([2.0, 2.1, 0.0, 0.0, 0.0])
@@ -110,10 +113,7 @@ def test_held_up_again_after_a_detour_it_backs_up_unless_something_is_behind():
 
 
 def test_after_a_recovery_it_turns_in_place_toward_a_waypoint_behind_it():
-    features = HallwayFeatures()
-    weights = dict.fromkeys(features.names, 0.0)
-    weights.update(path_progress=10.0, speed_squared=-10.0, speed_effort=-1.0, turn_effort=-1.0)
-    reward = LinearReward([weights[n] for n in features.names], features)
+    reward = progress_reward(speed_effort=-1.0, turn_effort=-1.0)
     scene = hall([])
     angles = np.linspace(-math.pi, math.pi, 36, endpoint=False)
     ranges = np.full(36, 5.0)
@@ -180,11 +180,8 @@ def mouth(length=9.0, wide=4.0, narrow=1.2, at=4.0):
 def meet_at_mouth(give_way: bool):
     """(reached, times it gave way, distances to the walker while giving way) of a drive
     into a corridor that a walker comes down head-on, meeting the robot at its mouth."""
-    features = HallwayFeatures()
-    weights = dict.fromkeys(features.names, 0.0)
-    weights.update(path_progress=10.0, speed_squared=-10.0, turn_squared=-1.0, speed_effort=-1.0,
-                   turn_effort=-1.0, wall_proximity=-1.0)
-    reward = LinearReward([weights[n] for n in features.names], features)
+    reward = progress_reward(turn_squared=-1.0, speed_effort=-1.0, turn_effort=-1.0,
+                             wall_proximity=-1.0)
     scene = mouth()
     # robot_sim's walkers wait for a robot in their way
     scene.people = [Walker("head_on", "head_on", np.array([[9.5, 2.1], [0.5, 2.1]]), 1.0,

@@ -208,9 +208,9 @@ class LearnRewardParams(NodeConfig):
     seed: int = param(0, "random seed of the learner")
     trim_steps: int = param(10, "cut each demo this many steps after it first reaches the goal "
                                 "(-1: no cut)")
-    accept_mismatch: bool = param(False, "--kind person: save the reward even when its controller's "
-                                         "own drives do not match the demonstrations' speed, time "
-                                         "to goal and closest approach (default: refuse, exit 1)")
+    accept_mismatch: bool = param(False, "--kind person or hallway: save the reward even when "
+                                         "its acceptance check refuses it (saved with the verdict "
+                                         "and saved_anyway; default: refuse, exit 1)")
 
     REQUIRED = ("output",)
 
