@@ -78,7 +78,8 @@ def floors(train: str = "generated", tests: Optional[Sequence[str]] = None):
 
 def out_dir() -> Path:
     """Where the rows go: one folder per teaching floor."""
-    return OUT if ARGS.train == "generated" else OUT / f"train_{ARGS.train}"
+    base = Path(ARGS.out) if ARGS.out else OUT
+    return base if ARGS.train == "generated" else base / f"train_{ARGS.train}"
 
 
 def view_policy(act_on_task, scene):
@@ -242,5 +243,8 @@ if __name__ == "__main__":
     parser.add_argument("--train", default="generated",
                         help="the floor the person teaches on: generated or a map name (transfer)")
     parser.add_argument("--tests", nargs="+", default=None, help="test map names")
+    parser.add_argument("--out", default="", help="the results folder (default: "
+                        "artifacts/bench/lfd_building; the baselines' tuning and drives are "
+                        "reused from it when there)")
     ARGS = parser.parse_args()
     sys.exit(main())

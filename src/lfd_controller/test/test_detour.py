@@ -118,6 +118,7 @@ def test_after_a_recovery_it_turns_in_place_toward_a_waypoint_behind_it():
     angles = np.linspace(-math.pi, math.pi, 36, endpoint=False)
     ranges = np.full(36, 5.0)
     ranges[[17, 18, 19]] = 0.2          # a wall 0.2 m in front of a robot facing away from the path
+    ranges[[35, 0, 1]] = 0.2            # and something right behind: its reward's way is held
     for wait, turns in ((1.0, True), (0.0, False)):
         controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=None,
                                        settings={"max_iter": 2}, grid=scene.grid,

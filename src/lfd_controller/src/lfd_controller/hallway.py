@@ -81,10 +81,11 @@ PROGRESS_PATIENCE = 3.0
 # nothing is behind it (nav2's BackUp recovery): someone standing close in front - who may be
 # waiting for the robot to make way - gets room to walk on.
 BACKUP_SPEED, BACKUP_TIME = 0.15, 2.0
-# After a recovery (a detour or backing up) a robot whose local waypoint lies more than
-# TURN_START rad off its heading first turns in place toward it, at up to TURN_RATE rad/s,
-# until within TURN_DONE rad (nav2's rotation shim): a detour often starts behind the robot,
-# and the learned reward turns slowly in tight spots.
+# After a recovery (a detour or backing up), while the reward's own command is held (the
+# safety stop, or standing), a robot whose local waypoint lies more than TURN_START rad off its
+# heading turns in place toward it, at up to TURN_RATE rad/s, until within TURN_DONE rad (nav2's
+# rotation shim): a detour often starts behind the robot, and the learned reward, facing a
+# wall, pushed into it instead of turning round.
 TURN_START, TURN_DONE, TURN_RATE = math.radians(60.0), math.radians(20.0), 1.0
 # The scans a detour is planned on: one every SCAN_EVERY s over the last SCAN_MEMORY s (what the
 # robot saw on its way in: a cart hides what is behind it from where the robot stands).
@@ -302,16 +303,16 @@ class HallwayController:
                 self.held_since_, self.status_ = None, "backing up: held up"
                 return command
             self._backing_until = -math.inf
-        if self._turning:
-            command = self._turn_toward(state, t, task.waypoint)
-            if command is not None:
-                return command
         command = self.planner.act(state, t, task, started=started)
         reason = self._too_close(angles, ranges, state[3], command)
         moving = abs(state[3]) > 0.05 or abs(command[0]) > 0.05
         if reason is None and moving:
             self.held_since_, self.status_ = None, "following"
             return command
+        if self._turning:       # the reward's own way is held: turn to the waypoint first
+            turn = self._turn_toward(state, t, task.waypoint)
+            if turn is not None:
+                return turn
         self.held_since_ = t if self.held_since_ is None else self.held_since_
         if t - self.held_since_ >= self.safety["blocked_after"]:
             return self._blocked(t - self.held_since_)
@@ -341,9 +342,10 @@ class HallwayController:
         return command
 
     def _turn_toward(self, state, t: float, waypoint) -> Optional[np.ndarray]:
-        """After a recovery: the command turning in place toward `waypoint` while it is more
-        than TURN_START (once started, TURN_DONE) rad off the heading, else None (and no more
-        turning until the next recovery). Turning holds the recovery clock."""
+        """After a recovery, the reward's command held: the command turning in place toward
+        `waypoint` while it is more than TURN_START (once started, TURN_DONE) rad off the
+        heading, else None (and no more turning until the next recovery). Turning holds the
+        recovery clock."""
         offset = np.asarray(waypoint, float) - state[:2]
         bearing = math.remainder(math.atan2(offset[1], offset[0]) - state[2], 2.0 * math.pi)
         limit = TURN_DONE if self.status_ == "turning to the path" else TURN_START
