@@ -121,12 +121,12 @@ def plan_give_way(path_follower, position, people, scans, *, clearance: float,
     if len(people):     # the way there keeps off them: dearer the nearer it comes
         apart = np.min([np.hypot(xs - x, ys - y) for x, y in people], axis=0)
         cost = cost + 2.0 * wall_cost * np.clip((clear - apart) / clear, 0.0, 1.0)
+    now = _nearest(position[None], people) if len(people) else math.inf
     order = np.argsort(np.hypot(xs[spots] - position[0], ys[spots] - position[1]))
     for index in order[:tries]:
         points = _cell_path(grid, cost, position, (xs[spots][index], ys[spots][index]))
         if points is not None and path_length(points) <= reach + 1.0 and not (
-                len(people) and _nearest(points, people) < _nearest(position[None], people)
-                - grid.resolution):
+                len(people) and _nearest(points, people) < now - grid.resolution):
             return points
     return None
 

@@ -249,7 +249,7 @@ class HallwayController:
             return False
         self._tried, self._recoveries = t, self._recoveries + 1
         scans = list(self._scans)[:-1] + [(laser, angles, ranges)]
-        clearance = self.safety["robot_radius"] + self.safety["stop_margin"] + DETOUR_ROOM
+        clearance = self._detour_clearance
         holding = people_holding(state, people, velocities, self._seen_people)
         if self.safety.get("give_way", True) and holding.any():    # someone waits for it
             spot = plan_give_way(self.follower, state[:2], np.asarray(people)[holding], scans,
@@ -263,6 +263,12 @@ class HallwayController:
             self._turning = True
             return False
         return self._rejoin(state, scans, clearance)
+
+    @property
+    def _detour_clearance(self) -> float:
+        """What detours and spots to give way at keep from the scan: the safety stop's reach
+        plus DETOUR_ROOM."""
+        return self.safety["robot_radius"] + self.safety["stop_margin"] + DETOUR_ROOM
 
     def _rejoin(self, state, scans, clearance: float) -> bool:
         """Follow a detour from where the robot is back to its path; True when found."""
@@ -330,8 +336,7 @@ class HallwayController:
         if command is None:
             self._giving_way = None
             scans = list(self._scans) + [(laser_pose(state, self.laser_offset), angles, ranges)]
-            self._rejoin(state, scans, self.safety["robot_radius"] + self.safety["stop_margin"]
-                         + DETOUR_ROOM)
+            self._rejoin(state, scans, self._detour_clearance)
             self._turning = True
             return None
         if self._too_close(angles, ranges, state[3], command) is not None:

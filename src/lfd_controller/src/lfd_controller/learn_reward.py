@@ -97,7 +97,7 @@ def read_building_drives(bags) -> Tuple[List[Tuple[Demonstration, RecordedSensor
     """(demonstration, what the robot saw) of each building drive in the bags, and a name for
     each (its bag's); DemonstrationError when there is none."""
     drives, names = [], []
-    for path in ros_demos._bag_files(bags):
+    for path in ros_demos.bag_files(bags):
         found = ros_demos.read_building_bags([path])
         drives += found
         names += [path.name] * len(found)

@@ -60,7 +60,8 @@ def write_bag(path: Path, msg: DemonstrationMsg, raw: Sequence = ()) -> Path:
     return path
 
 
-def _bag_files(paths: Sequence[Path]) -> List[Path]:
+def bag_files(paths: Sequence[Path]) -> List[Path]:
+    """The bags named in `paths`: a folder stands for the *.bag files in it (sorted)."""
     files: List[Path] = []
     for path in map(Path, paths):
         files.extend(sorted(path.glob("*.bag")) if path.is_dir() else [path])
@@ -70,7 +71,7 @@ def _bag_files(paths: Sequence[Path]) -> List[Path]:
 def read_bags(paths: Sequence[Path]) -> List[Demonstration]:
     """Demonstrations from bag files or folders of bags (sorted by name)."""
     demos = []
-    for path in _bag_files(paths):
+    for path in bag_files(paths):
         try:
             with rosbag.Bag(str(path)) as bag:
                 demos.extend(from_msg(msg) for _, msg, _ in bag.read_messages(topics=[DEMO_TOPIC]))
@@ -85,7 +86,7 @@ def read_building_bags(paths: Sequence[Path]) -> List[Tuple[Demonstration, "Reco
     from lfd_controller.hallway_recording import RecordedSensors
 
     drives = []
-    for path in _bag_files(paths):
+    for path in bag_files(paths):
         try:
             with rosbag.Bag(str(path)) as bag:
                 raw = {topic: [] for topic in SENSOR_TOPICS + ("/sim_time", "/odom", DEMO_TOPIC)}
