@@ -112,25 +112,66 @@ def test_held_up_again_after_a_detour_it_backs_up_unless_something_is_behind():
         assert controller.status_.startswith("backing up") == backs
 
 
-def test_after_a_recovery_it_turns_in_place_toward_a_waypoint_behind_it():
+def test_on_a_new_path_it_first_turns_in_place_toward_a_waypoint_behind_it():
     reward = progress_reward(speed_effort=-1.0, turn_effort=-1.0)
     scene = hall([])
     angles = np.linspace(-math.pi, math.pi, 36, endpoint=False)
     ranges = np.full(36, 5.0)
+    for heading, turns in ((math.pi, True), (0.5, False)):     # the path runs along +x
+        controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=None,
+                                       settings={"max_iter": 2}, grid=scene.grid,
+                                       safety=dict(HALLWAY_SAFETY))
+        state = np.array([2.0, 2.1, heading, 0.0, 0.0])
+        command = controller.act(state, 0.0, angles, ranges, np.zeros((0, 2)), np.zeros((0, 2)))
+        assert (controller.status_ == "turning to the path") == turns, controller.status_
+        if turns:
+            assert command[0] == 0.0 and abs(command[1]) == 1.0
+        controller.act(np.array([2.0, 2.1, 0.0, 0.0, 0.0]), 0.1, angles, ranges,
+                       np.zeros((0, 2)), np.zeros((0, 2)))
+        assert controller.status_ == "following"       # facing the path: done turning
+
+
+def test_after_a_recovery_it_turns_in_place_toward_a_waypoint_behind_it():
+    reward = progress_reward(speed_effort=-1.0, turn_effort=-1.0)
+    scene = hall([])
+    angles = np.linspace(-math.pi, math.pi, 36, endpoint=False)
+    clear = np.full(36, 5.0)
+    ranges = clear.copy()
     ranges[[17, 18, 19]] = 0.2          # a wall 0.2 m in front of a robot facing away from the path
     ranges[[35, 0, 1]] = 0.2            # and something right behind: its reward's way is held
     for wait, turns in ((1.0, True), (0.0, False)):
         controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=None,
                                        settings={"max_iter": 2}, grid=scene.grid,
                                        safety=dict(HALLWAY_SAFETY, replan_after=wait))
-        state = np.array([2.0, 2.1, math.pi, 0.0, 0.0])
+        controller.act(np.array([2.0, 2.1, 0.0, 0.0, 0.0]), 0.0, angles, clear,
+                       np.zeros((0, 2)), np.zeros((0, 2)))     # started facing its path
+        state = np.array([2.0, 2.1, math.pi, 0.0, 0.0])       # then turned round and held
         statuses = []
-        for t in np.arange(0.0, 1.5, 0.1):
+        for t in np.arange(0.1, 1.6, 0.1):
             command = controller.act(state, t, angles, ranges, np.zeros((0, 2)), np.zeros((0, 2)))
             statuses.append(controller.status_)
         assert ("turning to the path" in statuses) == turns, statuses
         if turns:
             assert command[0] == 0.0 and abs(command[1]) == 1.0
+
+
+def test_a_re_planned_path_keeps_what_the_robot_saw_and_its_recovery_counts():
+    reward = progress_reward(speed_effort=-1.0, turn_effort=-1.0)
+    scene = hall([])
+    angles = np.linspace(-math.pi, math.pi, 36, endpoint=False)
+    ranges = np.full(36, 5.0)
+    controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=None,
+                                   settings={"max_iter": 2}, grid=scene.grid,
+                                   safety=dict(HALLWAY_SAFETY))
+    state = np.array([2.0, 2.1, 0.0, 0.0, 0.0])
+    for t in np.arange(0.0, 2.0, 0.1):
+        controller.act(state, t, angles, ranges, np.zeros((0, 2)), np.zeros((0, 2)))
+    controller.detours_, seen = 2, len(controller._scans)
+    back = scene.path[::-1]
+    controller.new_path(back[back[:, 0] <= 2.0])        # back the way it came
+    assert seen >= 3 and len(controller._scans) == seen and controller.detours_ == 2
+    controller.act(state, 2.0, angles, ranges, np.zeros((0, 2)), np.zeros((0, 2)))
+    assert controller.status_ == "turning to the path"
 
 
 def test_along_a_detour_the_waypoint_never_skips_a_stretch_out_of_sight():

@@ -6,7 +6,8 @@ people, plans with the reward plus a fixed barrier around every scan point and p
 (`HallwayBarrier`: the demonstrations never show what touching costs) and returns the first
 command - or, when moving on would bring the scan inside its safety margin, a zero speed
 (turning in place: a round robot touches nothing that way), saying why
-(`status_`). A robot held up (without 0.3 m of progress along the path) for `replan_after`
+(`status_`). A waypoint far off its heading on a new path, or after a recovery, is first turned
+to in place. A robot held up (without 0.3 m of progress along the path) for `replan_after`
 seconds follows a detour planned on the floor map and the scan (detour.plan_detour) round what
 the path's planner never saw, and held up again first backs up; standing still for
 `blocked_after` seconds, or held up for 3 x as long, it reports the path blocked and stays
@@ -81,11 +82,11 @@ PROGRESS_PATIENCE = 3.0
 # nothing is behind it (nav2's BackUp recovery): someone standing close in front - who may be
 # waiting for the robot to make way - gets room to walk on.
 BACKUP_SPEED, BACKUP_TIME = 0.15, 2.0
-# After a recovery (a detour or backing up), while the reward's own command is held (the
-# safety stop, or standing), a robot whose local waypoint lies more than TURN_START rad off its
-# heading turns in place toward it, at up to TURN_RATE rad/s, until within TURN_DONE rad (nav2's
-# rotation shim): a detour often starts behind the robot, and the learned reward, facing a
-# wall, pushed into it instead of turning round.
+# On a new path and after a recovery (a detour or backing up), a robot whose local waypoint
+# lies more than TURN_START rad off its heading first turns in place toward it, at up to
+# TURN_RATE rad/s, until within TURN_DONE rad (nav2's rotation shim): a detour or a re-planned
+# path often starts behind the robot, and the learned reward, facing a wall, pushed into it
+# instead of turning round.
 TURN_START, TURN_DONE, TURN_RATE = math.radians(60.0), math.radians(20.0), 1.0
 # The scans a detour is planned on: one every SCAN_EVERY s over the last SCAN_MEMORY s (what the
 # robot saw on its way in: a cart hides what is behind it from where the robot stands).
@@ -209,22 +210,29 @@ class HallwayController:
     grid: Optional[GridMap] = None
 
     def __post_init__(self):
-        self.task = TaskBuilder(self.path, lookahead=self.safety["lookahead"],
-                                laser_offset=self.laser_offset, through_goal=True)
-        self.follower = self.task.follower
         planned = HallwayBarrier(self.reward, robot_radius=self.safety["robot_radius"],
                                  person_radius=self.safety["person_radius"],
                                  margin=self.safety["barrier_margin"])
         budget = None if self.budget is None else PLANNING_SHARE * self.budget
         self.planner = RecedingHorizonController(planned, self.model, budget=budget,
                                                  **self.settings)
-        self.status_, self.held_since_ = "following", None
         self.detours_ = self.backups_ = self.give_ways_ = 0
-        self._giving_way: Optional[GivingWay] = None
-        self._left, self._getting_on, self._tried = math.inf, 0.0, 0.0
-        self._recoveries, self._backing_until, self._turning = 0, -math.inf, False
         self._scans, self._scanned = deque(maxlen=int(SCAN_MEMORY / SCAN_EVERY)), -math.inf
         self._seen_people = deque(maxlen=int(PEOPLE_MEMORY / SCAN_EVERY))
+        self.new_path(self.path)
+
+    def new_path(self, path) -> None:
+        """Follow `path` (a re-plan to the same goal) from now on, as a new controller would,
+        keeping what the robot saw (the scans and people that detours and giving way use) and
+        its recovery counts."""
+        self.path = np.asarray(path, float)
+        self.task = TaskBuilder(self.path, lookahead=self.safety["lookahead"],
+                                laser_offset=self.laser_offset, through_goal=True)
+        self.follower = self.task.follower
+        self.status_, self.held_since_ = "following", None
+        self._giving_way: Optional[GivingWay] = None
+        self._left, self._getting_on, self._tried = math.inf, 0.0, 0.0
+        self._recoveries, self._backing_until, self._turning = 0, -math.inf, True
 
     @property
     def goal(self) -> np.ndarray:
@@ -309,16 +317,16 @@ class HallwayController:
                 self.held_since_, self.status_ = None, "backing up: held up"
                 return command
             self._backing_until = -math.inf
+        if self._turning:       # a new path or a detour behind the robot: face it first
+            turn = self._turn_toward(state, t, task.waypoint)
+            if turn is not None:
+                return turn
         command = self.planner.act(state, t, task, started=started)
         reason = self._too_close(angles, ranges, state[3], command)
         moving = abs(state[3]) > 0.05 or abs(command[0]) > 0.05
         if reason is None and moving:
             self.held_since_, self.status_ = None, "following"
             return command
-        if self._turning:       # the reward's own way is held: turn to the waypoint first
-            turn = self._turn_toward(state, t, task.waypoint)
-            if turn is not None:
-                return turn
         self.held_since_ = t if self.held_since_ is None else self.held_since_
         if t - self.held_since_ >= self.safety["blocked_after"]:
             return self._blocked(t - self.held_since_)
@@ -347,10 +355,9 @@ class HallwayController:
         return command
 
     def _turn_toward(self, state, t: float, waypoint) -> Optional[np.ndarray]:
-        """After a recovery, the reward's command held: the command turning in place toward
-        `waypoint` while it is more than TURN_START (once started, TURN_DONE) rad off the
-        heading, else None (and no more turning until the next recovery). Turning holds the
-        recovery clock."""
+        """On a new path or after a recovery: the command turning in place toward `waypoint`
+        while it is more than TURN_START (once started, TURN_DONE) rad off the heading, else
+        None (and no more turning until the next recovery). Turning holds the recovery clock."""
         offset = np.asarray(waypoint, float) - state[:2]
         bearing = math.remainder(math.atan2(offset[1], offset[0]) - state[2], 2.0 * math.pi)
         limit = TURN_DONE if self.status_ == "turning to the path" else TURN_START

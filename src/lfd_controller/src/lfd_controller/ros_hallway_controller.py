@@ -41,7 +41,8 @@ class HallwayControllerNode:
       ~give_way (true: held up by someone who stopped in front, first move out of their way),
       ~laser_offset (0.1 m), ~person_radius (0.25 m), ~barrier_margin (0.1 m).
     Topics in: odom (nav_msgs/Odometry, pose in the path's frame), path (nav_msgs/Path: the
-      global plan, e.g. move_base's; followed from its first pose), goal (geometry_msgs/
+      global plan, e.g. move_base's; followed from its first pose; one ending within
+      ~goal_tolerance of the current goal is a re-plan, keeping the controller), goal (geometry_msgs/
       PoseStamped: planned on the map with robot_common.gridplan when no path comes), map
       (nav_msgs/OccupancyGrid, latched), scan (sensor_msgs/LaserScan), people (robot_common/
       People: tracked positions and velocities, the layout of people_msgs/People).
@@ -49,7 +50,8 @@ class HallwayControllerNode:
       (diagnostic_msgs/DiagnosticArray, name "reward_controller: path"): OK following (progress,
       waypoint) / arrived, WARN stopped (zero speed, turning allowed: what the scan shows inside
       the margin on its way), backing up (held up again after a detour), turning to the path
-      (in place, after a detour or backing up, toward a waypoint behind it), giving way (to a
+      (in place, on a new path or after a detour or backing up, toward a waypoint behind it),
+      giving way (to a
       spot out of the way, or waiting there, of someone who stopped for the robot) or no path,
       ERROR
       blocked (stood still ~blocked_after s, or no 0.3 m of progress for 3 x that, detours and
@@ -83,14 +85,24 @@ class HallwayControllerNode:
         return self
 
     def follow(self, points: np.ndarray, source: str) -> None:
+        """Follow `points`: a re-plan to the goal being driven to keeps the controller (what it
+        saw on its way, its recovery counts); another goal starts a new one."""
         with self.lock:
-            self.controller = HallwayController(
-                self.reward, points, self.model, budget=1.0 / self.config.rate,
-                goal_tolerance=self.config.goal_tolerance, laser_offset=self.config.laser_offset,
-                settings=self.settings, safety=self.config.hallway_safety(), grid=self.grid)
+            controller = self.controller
+            if controller is not None and not controller.status_.startswith("arrived") and \
+                    np.hypot(*(controller.path[-1] - points[-1])) <= self.config.goal_tolerance:
+                controller.new_path(points)
+                replan = "a re-plan: "
+            else:
+                controller = self.controller = HallwayController(
+                    self.reward, points, self.model, budget=1.0 / self.config.rate,
+                    goal_tolerance=self.config.goal_tolerance,
+                    laser_offset=self.config.laser_offset, settings=self.settings,
+                    safety=self.config.hallway_safety(), grid=self.grid)
+                replan = ""
             self.source, self.status = source, "following"
-        rospy.loginfo(f"reward_controller: following {source} ({len(points)} poses, "
-                      f"{self.controller.follower.length:.1f} m)")
+        rospy.loginfo(f"reward_controller: following {replan}{source} ({len(points)} poses, "
+                      f"{controller.follower.length:.1f} m)")
 
     def on_path(self, msg: Path) -> None:
         points = np.array([[p.pose.position.x, p.pose.position.y] for p in msg.poses])
