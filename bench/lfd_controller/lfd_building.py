@@ -50,7 +50,13 @@ from lfd_controller.hallway import HALLWAY_SAFETY, TaskBuilder  # noqa: E402
 from lfd_controller.hallway_baselines import SamplingController, SocialForceController, tune  # noqa: E402
 from lfd_controller.sim import FAMILIES  # noqa: E402
 from lfd_controller.sim.hallway_people import drive_figures, hallway_demonstration  # noqa: E402
-from lfd_controller.sim.teach_hallway import drive_learner, family_person, scenes, teach  # noqa: E402
+from lfd_controller.sim.teach_hallway import (  # noqa: E402
+    WAIT_LONG,
+    drive_learner,
+    family_person,
+    scenes,
+    teach,
+)
 from robot_common.maps import load_map  # noqa: E402
 from robot_sim.building import generate_building  # noqa: E402
 from robot_sim.hallway import drive  # noqa: E402
@@ -207,6 +213,13 @@ def table():
         if used:
             print(f"learned drives with {kind}: {len(used)} of {len(recovered)} "
                   f"({sum(r['success'] for r in used)} of them reached the goal)")
+    truth = [r["giving_way"] for r in recovered if "giving_way" in r]
+    if truth:
+        total = {key: sum(t[key] for t in truth) for key in truth[0]}
+        print(f"giving way against the simulator's truth ({len(truth)} drives): "
+              f"{total['right']} with someone near waiting for the robot, {total['wrong']} "
+              f"without; of {total['standoffs']} standoffs (someone near waiting while the robot "
+              f"stood {WAIT_LONG:g} s), {total['missed']} without giving way")
     if cycles8:
         print(f"\ncycle time with 8 people, 0.1 s budget: {len(cycles8)} cycles, p50 "
               f"{np.percentile(cycles8, 50) * 1000:.0f} ms, p99 {np.percentile(cycles8, 99) * 1000:.0f} ms, "

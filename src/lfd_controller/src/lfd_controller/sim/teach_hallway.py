@@ -19,6 +19,7 @@ SAVED_SETTINGS). Progress on stderr; exit 1 with one `ERROR:` line when no drive
 the reward is refused (`--accept-anyway` saves a refused reward, saying so in the file).
 """
 import argparse
+import math
 import sys
 import time
 from dataclasses import dataclass, field
@@ -50,6 +51,10 @@ __all__ = ["LENGTH", "floor_grid", "scenes", "drive_learner", "Teaching", "teach
 LENGTH = (10.0, 30.0)   # start to goal along the halls (m): longer drives cost CPU
 FIRST_SCENE = 100       # the training scenes' first seed (the benchmark's)
 TRIES = 3               # scenes tried per wanted demonstration
+# The truth about giving way: a walker holding for the robot (Walker.yield_to) within WAIT_NEAR m
+# of it waits for it; waits as long as the controller is held up before it recovers count.
+WAIT_NEAR, WAIT_LONG = 2.0, HALLWAY_SAFETY["replan_after"]
+STANDING = 0.05         # m/s: the robot stands
 LAYOUTS = ("hall", "loop")
 
 
@@ -92,18 +97,61 @@ def drive_learner(scene: HallwayScene, reward, budget: Optional[float] = 0.1,
                                    safety=dict(HALLWAY_SAFETY, barrier_margin=margin),
                                    grid=scene.grid)
     cycles: List[float] = []
+    waits = WaitsForRobot(scene)
 
     def policy(state, t, seen):
         started = time.perf_counter()
+        gave_way = controller.give_ways_
         command = controller.act(state, t, seen.angles, seen.ranges, seen.people, seen.velocities)
         cycles.append(time.perf_counter() - started)
+        waits.step(state, t, controller.give_ways_ > gave_way)
         return command
     figures = drive_figures(drive(scene, policy))
     figures["cycles"] = cycles
     figures["status"] = controller.status_
     figures["recoveries"] = {"detours": controller.detours_, "backing_up": controller.backups_,
                              "giving_way": controller.give_ways_}
+    figures["giving_way"] = waits.figures()
     return figures
+
+
+class WaitsForRobot:
+    """The simulator's truth about giving way: whether someone near the robot was really
+    waiting for it (`Walker.holding`) when the controller gave way, and the standoffs - someone
+    near waiting for the robot while it stood, for WAIT_LONG s or more - in which it never did."""
+
+    def __init__(self, scene: HallwayScene):
+        self.scene = scene
+        self.right = self.wrong = 0
+        self.waits: Dict[int, List] = {}        # walker -> [since, gave way during it]
+        self.missed = self.long = 0
+
+    def step(self, state, t: float, gave_way: bool) -> None:
+        waiting = {i for i, walker in enumerate(self.scene.people)
+                   if walker.holding and walker in self.scene.present(t)
+                   and np.hypot(*(walker.position(t) - state[:2])) <= WAIT_NEAR}
+        if gave_way:
+            self.right, self.wrong = self.right + bool(waiting), self.wrong + (not waiting)
+        if abs(state[3]) >= STANDING and not gave_way:
+            waiting = set()         # it drives on: no standoff
+        for i in waiting:
+            self.waits.setdefault(i, [t, False])[1] |= gave_way
+        for i in [i for i in self.waits if i not in waiting]:
+            self._end(self.waits.pop(i), t)
+
+    def _end(self, wait, t: float) -> None:
+        if t - wait[0] >= WAIT_LONG:
+            self.long += 1
+            self.missed += not wait[1]
+
+    def figures(self) -> Dict[str, int]:
+        """right / wrong: give-ways with / without someone near waiting for the robot;
+        standoffs: of WAIT_LONG s or more; missed: those it never gave way in."""
+        for wait in list(self.waits.values()):
+            self._end(wait, math.inf)
+        self.waits = {}
+        return {"right": self.right, "wrong": self.wrong, "standoffs": self.long,
+                "missed": self.missed}
 
 
 @dataclass
