@@ -54,3 +54,29 @@ def test_the_floor_of_a_map_file_is_read(tmp_path):
                                      "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
     grid = floor_grid(str(tmp_path / "f.yaml"))
     assert isinstance(grid, GridMap) and grid.resolution == 0.5
+
+
+def test_giving_way_is_scored_against_who_really_waited_for_the_robot():
+    import numpy as np
+
+    from lfd_controller.sim.teach_hallway import WaitsForRobot
+    from robot_common.maps import FREE
+    from robot_sim.hallway import HallwayScene, Walker
+    cells = np.full((40, 100), FREE, dtype=np.int8)
+    near = Walker("near", "head-on", np.array([[3.0, 2.0], [0.0, 2.0]]))     # held where they are
+    far = Walker("far", "head-on", np.array([[9.0, 2.0], [6.0, 2.0]]))
+    scene = HallwayScene(GridMap(cells, 0.1), np.array([[1.0, 2.0], [9.0, 2.0]]),
+                         np.array([1.0, 2.0, 0.0, 0.0, 0.0]), [near, far])
+    standing, moving = np.array([2.0, 2.0, 0.0, 0.0, 0.0]), np.array([2.0, 2.0, 0.0, 0.5, 0.0])
+    waits = WaitsForRobot(scene)
+    near.holding = True                   # 1 m away and waiting for the robot
+    for t in np.arange(0.0, 5.0, 0.1):    # a 5 s standoff, never given way in
+        waits.step(standing, t, False)
+    waits.step(moving, 5.0, False)        # drives on past: that wait is over
+    waits.step(standing, 5.1, True)       # gives way to them: right
+    near.holding, far.holding = False, True
+    waits.step(standing, 5.2, True)       # gives way with only someone 7 m off waiting: wrong
+    for t in np.arange(5.3, 6.0, 0.1):    # a wait too short to count
+        near.holding = True
+        waits.step(standing, t, False)
+    assert waits.figures() == {"right": 1, "wrong": 1, "standoffs": 1, "missed": 1}

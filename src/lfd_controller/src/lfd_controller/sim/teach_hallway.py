@@ -19,7 +19,6 @@ SAVED_SETTINGS). Progress on stderr; exit 1 with one `ERROR:` line when no drive
 the reward is refused (`--accept-anyway` saves a refused reward, saying so in the file).
 """
 import argparse
-import math
 import sys
 import time
 from dataclasses import dataclass, field
@@ -125,10 +124,13 @@ class WaitsForRobot:
         self.right = self.wrong = 0
         self.waits: Dict[int, List] = {}        # walker -> [since, gave way during it]
         self.missed = self.long = 0
+        self.last = 0.0
 
     def step(self, state, t: float, gave_way: bool) -> None:
+        """The robot at `state` at time `t`; `gave_way`: the controller began giving way."""
+        self.last = t
         waiting = {i for i, walker in enumerate(self.scene.people)
-                   if walker.holding and walker in self.scene.present(t)
+                   if walker.holding and walker.present(t)
                    and np.hypot(*(walker.position(t) - state[:2])) <= WAIT_NEAR}
         if gave_way:
             self.right, self.wrong = self.right + bool(waiting), self.wrong + (not waiting)
@@ -148,7 +150,7 @@ class WaitsForRobot:
         """right / wrong: give-ways with / without someone near waiting for the robot;
         standoffs: of WAIT_LONG s or more; missed: those it never gave way in."""
         for wait in list(self.waits.values()):
-            self._end(wait, math.inf)
+            self._end(wait, self.last)
         self.waits = {}
         return {"right": self.right, "wrong": self.wrong, "standoffs": self.long,
                 "missed": self.missed}
