@@ -45,7 +45,8 @@ from robot_common.unicycle import Unicycle
 from robot_sim.building import generate_building
 from robot_sim.hallway import HallwayScene, drive, make_scene
 
-__all__ = ["LENGTH", "floor_grid", "scenes", "drive_learner", "Teaching", "teach", "main"]
+__all__ = ["LENGTH", "WAIT_LONG", "floor_grid", "scenes", "drive_learner", "WaitsForRobot", "Teaching",
+           "teach", "main"]
 
 LENGTH = (10.0, 30.0)   # start to goal along the halls (m): longer drives cost CPU
 FIRST_SCENE = 100       # the training scenes' first seed (the benchmark's)
