@@ -87,6 +87,22 @@ def test_a_person_waits_rather_than_walk_into_the_robot():
     assert walking.position(8.0)[0] == pytest.approx(1.0 + 0.68, abs=0.15)
 
 
+def test_a_person_coming_round_a_corner_waits_while_the_robot_stands_where_they_come_in():
+    # they would come in 0.35 m beside the robot (which stands at x = 1 m), at 1 s
+    entering = Walker("p1", "overtaking", np.array([[1.0, 2.35], [1.0, 3.8]]), speed=0.2,
+                      depart=1.0, enters=True)
+    scene = open_scene([entering])
+    seen = {}
+
+    def stand_then_drive(state, t, obs):
+        seen[round(t, 1)] = len(obs.people)
+        return np.array([0.5 if t >= 3.0 else 0.0, 0.0])
+    result = drive(scene, stand_then_drive, max_time=9.0)
+    assert result.collision is None
+    assert seen[2.9] == 0                    # round the corner while the robot stood there
+    assert seen[8.9] == 1 and entering.position(8.9)[1] > 2.5      # came in after it left
+
+
 def test_a_drive_ends_at_the_goal_or_at_what_it_hits():
     scene = open_scene([])
     reached = drive(scene, lambda state, t, obs: np.array([0.5, 0.0]))

@@ -55,7 +55,8 @@ def route_along(points: np.ndarray, distances: np.ndarray,
 class Walker:
     """A person walking `route` (N, 2) at `speed` from time `depart` (standing before; gone
     once at the route's end, through a door); with `enters` true not there before `depart`
-    either (coming round a corner). A person with speed 0 stands at route[0] all the time."""
+    either (coming round a corner), and not while the robot stands where they would come in
+    (`outside`). A person with speed 0 stands at route[0] all the time."""
 
     name: str
     kind: str
@@ -65,6 +66,8 @@ class Walker:
     enters: bool = False
     held: float = 0.0               # seconds spent waiting for the robot so far
     holding: bool = False           # waiting now
+    outside: bool = False           # waiting round the corner: the robot is in the way in
+    entered: bool = False
     _arc: Optional[np.ndarray] = field(default=None, init=False, repr=False, compare=False)
 
     def arc(self) -> np.ndarray:
@@ -80,7 +83,7 @@ class Walker:
     def present(self, t: float) -> bool:
         if self.speed <= 0:
             return True
-        if self.enters and t < self.depart:
+        if self.enters and (t < self.depart or self.outside):
             return False
         return self.walked(t) * self.speed < self.arc()[-1]
 
@@ -97,8 +100,15 @@ class Walker:
     def yield_to(self, robot, t: float, dt: float, room: float) -> None:
         """Wait this step (hold) when walking on would bring the person within `room` m (centre
         to centre) of the robot at `robot` (x, y) in front of them: people do not walk into a
-        robot."""
-        self.holding = False
+        robot, nor come round a corner onto it (`enters`: waiting outside while the robot is
+        within `room` of route[0])."""
+        self.holding = self.outside = False
+        if self.enters and not self.entered and self.speed > 0 and t + dt >= self.depart:
+            if np.hypot(*(np.asarray(self.route[0], float) - robot)) < room:
+                self.held += dt
+                self.holding = self.outside = True
+                return
+            self.entered = True
         if self.speed <= 0 or not self.present(t) or t < self.depart:
             return
         here, there = self.position(t), self.position(t + dt)
@@ -139,6 +149,7 @@ class HallwayScene:
         """Back to the scene's start (nobody has waited yet)."""
         for walker in self.people:
             walker.held, walker.holding = 0.0, False
+            walker.outside = walker.entered = False
 
     def advance(self, robot, t: float, dt: float) -> None:
         """The people's step from t to t + dt with the robot at (x, y): who would walk into it
