@@ -330,9 +330,9 @@ class RecordedVerdict:
 
     def failure_lines(self) -> List[str]:
         """Why the reward is refused, the failing drives last ([] when accepted)."""
-        failing = self.failing_drives()
         if self.accepted:
             return []
+        failing = self.failing_drives()
         return list(self.verdict["failures"]) + (
             [f"failing drives: {', '.join(failing)}"] if failing else [])
 

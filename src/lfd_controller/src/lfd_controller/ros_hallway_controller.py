@@ -42,20 +42,18 @@ class HallwayControllerNode:
       ~laser_offset (0.1 m), ~person_radius (0.25 m), ~barrier_margin (0.1 m).
     Topics in: odom (nav_msgs/Odometry, pose in the path's frame), path (nav_msgs/Path: the
       global plan, e.g. move_base's; followed from its first pose; one ending within
-      ~goal_tolerance of the current goal is a re-plan, keeping the controller), goal (geometry_msgs/
-      PoseStamped: planned on the map with robot_common.gridplan when no path comes), map
-      (nav_msgs/OccupancyGrid, latched), scan (sensor_msgs/LaserScan), people (robot_common/
-      People: tracked positions and velocities, the layout of people_msgs/People).
+      ~goal_tolerance of the current goal is a re-plan, keeping the controller), goal
+      (geometry_msgs/PoseStamped: planned on the map with robot_common.gridplan when no path
+      comes), map (nav_msgs/OccupancyGrid, latched), scan (sensor_msgs/LaserScan), people
+      (robot_common/People: tracked positions and velocities, the layout of people_msgs/People).
     Topics out: cmd_vel (geometry_msgs/Twist), ~cycle_time (std_msgs/Float64), /diagnostics
       (diagnostic_msgs/DiagnosticArray, name "reward_controller: path"): OK following (progress,
       waypoint) / arrived, WARN stopped (zero speed, turning allowed: what the scan shows inside
       the margin on its way), backing up (held up again after a detour), turning to the path
       (in place, on a new path or after a detour or backing up, toward a waypoint behind it),
-      giving way (to a
-      spot out of the way, or waiting there, of someone who stopped for the robot) or no path,
-      ERROR
-      blocked (stood still ~blocked_after s, or no 0.3 m of progress for 3 x that, detours and
-      backing up tried: the robot stays stopped until a new path).
+      giving way (to a spot out of the way, or waiting there, of someone who stopped for the
+      robot) or no path, ERROR blocked (stood still ~blocked_after s, or no 0.3 m of progress
+      for 3 x that, detours and backing up tried: the robot stays stopped until a new path).
     Services: ~enable (std_srvs/SetBool).
     """
 

@@ -66,9 +66,13 @@ class Walker:
     enters: bool = False
     held: float = 0.0               # seconds spent waiting for the robot so far
     holding: bool = False           # waiting now
-    outside: bool = False           # waiting round the corner: the robot is in the way in
-    entered: bool = False
+    entered: bool = False           # came round the corner (`enters`)
     _arc: Optional[np.ndarray] = field(default=None, init=False, repr=False, compare=False)
+
+    @property
+    def outside(self) -> bool:
+        """Waiting round the corner: due to come in, with the robot in the way in."""
+        return self.enters and self.holding and not self.entered
 
     def arc(self) -> np.ndarray:
         """The route's arc lengths (worked out once: a route does not change)."""
@@ -102,11 +106,11 @@ class Walker:
         to centre) of the robot at `robot` (x, y) in front of them: people do not walk into a
         robot, nor come round a corner onto it (`enters`: waiting outside while the robot is
         within `room` of route[0])."""
-        self.holding = self.outside = False
+        self.holding = False
         if self.enters and not self.entered and self.speed > 0 and t + dt >= self.depart:
             if np.hypot(*(np.asarray(self.route[0], float) - robot)) < room:
                 self.held += dt
-                self.holding = self.outside = True
+                self.holding = True
                 return
             self.entered = True
         if self.speed <= 0 or not self.present(t) or t < self.depart:
@@ -149,7 +153,7 @@ class HallwayScene:
         """Back to the scene's start (nobody has waited yet)."""
         for walker in self.people:
             walker.held, walker.holding = 0.0, False
-            walker.outside = walker.entered = False
+            walker.entered = False
 
     def advance(self, robot, t: float, dt: float) -> None:
         """The people's step from t to t + dt with the robot at (x, y): who would walk into it

@@ -124,7 +124,7 @@ class WaitsForRobot:
         self.scene = scene
         self.right = self.wrong = 0
         self.waits: Dict[int, List] = {}        # walker -> [since, gave way during it]
-        self.missed = self.long = 0
+        self.missed = self.standoffs = 0
         self.last = 0.0
 
     def step(self, state, t: float, gave_way: bool) -> None:
@@ -144,7 +144,7 @@ class WaitsForRobot:
 
     def _end(self, wait, t: float) -> None:
         if t - wait[0] >= WAIT_LONG:
-            self.long += 1
+            self.standoffs += 1
             self.missed += not wait[1]
 
     def figures(self) -> Dict[str, int]:
@@ -153,7 +153,7 @@ class WaitsForRobot:
         for wait in list(self.waits.values()):
             self._end(wait, self.last)
         self.waits = {}
-        return {"right": self.right, "wrong": self.wrong, "standoffs": self.long,
+        return {"right": self.right, "wrong": self.wrong, "standoffs": self.standoffs,
                 "missed": self.missed}
 
 
