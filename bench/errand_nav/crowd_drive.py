@@ -22,8 +22,9 @@ import numpy as np
 
 from robot_common.gridplan import clearance_map
 from robot_common.maps import GridMap
+from robot_common.polylines import arc_lengths, points_along
 from robot_sim.crowd import Crowd
-from robot_sim.hallway import PERSON_RADIUS, route_along
+from robot_sim.hallway import PERSON_RADIUS
 from robot_sim.people import PeopleSimulator
 
 ROBOT_RADIUS = 0.18
@@ -68,8 +69,8 @@ class Floor:
 def drive(floor: Floor, sim: PeopleSimulator, points: np.ndarray, depart_hours: float, *,
           speed: float, meet_radius: float, seed: int) -> DriveOutcome:
     """Follow `points` (N, 2) leaving at `depart_hours` (of the week) among `sim`'s people."""
-    arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
-    dense = route_along(points, np.arange(0.0, arc[-1] + 0.1, 0.1))
+    arc = arc_lengths(points)
+    dense = points_along(points, np.arange(0.0, arc[-1] + 0.1, 0.1), arc)
     crowd = Crowd(sim, radius=PERSON_RADIUS, seed=seed)
     pose = np.array(points[0], float)
     heading = math.atan2(*(dense[min(5, len(dense) - 1)] - pose)[::-1])

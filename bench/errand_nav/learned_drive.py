@@ -33,9 +33,10 @@ from crowd_drive import ROBOT_RADIUS, Floor, make_way, step_aside, touching
 
 from lfd_controller.hallway import HALLWAY_SAFETY, HallwayController
 from lfd_controller.learning import controller_settings, load_reward
+from robot_common.polylines import point_at
 from robot_common.unicycle import Unicycle
 from robot_sim.crowd import Crowd
-from robot_sim.hallway import PERSON_RADIUS, HallwayScene, Walker, observe, route_along
+from robot_sim.hallway import PERSON_RADIUS, HallwayScene, Walker, observe
 
 STEP = 0.1            # s: the controller's cycle
 SEEN = 9.0            # m: people further than this are neither scanned nor tracked (8 m laser)
@@ -137,7 +138,7 @@ class LearnedDriver:
 
 def start_state(points: np.ndarray) -> np.ndarray:
     """(x, y, yaw, v, w) at the path's start, facing 0.4 m along it, standing."""
-    ahead = route_along(points, [0.4])[0]
+    ahead = point_at(points, 0.4)
     heading = math.atan2(ahead[1] - points[0][1], ahead[0] - points[0][0])
     return np.array([points[0][0], points[0][1], heading, 0.0, 0.0])
 

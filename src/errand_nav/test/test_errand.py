@@ -53,6 +53,18 @@ def test_held_up_longer_than_the_bound_is_blocked_and_progress_resets_the_clock(
     assert job.check((2.0, 0.0), 31.5).action == "blocked"
 
 
+def test_what_the_laser_showed_while_held_counts_as_in_the_way_and_progress_forgets_it():
+    job = errand()
+    job.check((1.0, 0.0), 0.0)
+    job.sighted(np.array([[3.0, 0.5], [7.0, 0.0]]))            # seen, then the robot got on
+    assert job.check((2.0, 0.0), 2.0).action == "go"
+    job.sighted(np.array([[2.6, 0.0], [2.61, 0.01]]))           # held: a cart, twice in a cell
+    job.sighted(np.zeros((0, 2)))                               # turned away from it
+    seen = job.saw_blocking(np.array([[2.6, -0.3]]))
+    assert sorted(map(tuple, seen.round(2))) == [(2.6, -0.3), (2.6, 0.0)]
+    assert len(job.saw_blocking(np.zeros((0, 2)))) == 2         # kept for the errand, once
+
+
 def test_a_forecast_look_comes_every_period_while_driving():
     job = errand()
     for t in range(0, 30, 3):

@@ -174,6 +174,54 @@ def test_a_re_planned_path_keeps_what_the_robot_saw_and_its_recovery_counts():
     assert controller.status_ == "turning to the path"
 
 
+def test_re_plans_of_the_same_way_keep_the_clocks_a_held_robot_reports_blocked_and_retries():
+    # move_base re-plans the same way every 0.5 s (each a little off the last) while the way
+    # is held by a wall across the hall in front: the recoveries and the blocked report still
+    # come; blocked, the robot stays stopped for blocked_after s, then a re-plan tries again
+    reward = progress_reward(speed_effort=-1.0, turn_effort=-1.0)
+    scene = hall([])
+    angles = np.linspace(-math.pi, math.pi, 36, endpoint=False)
+    ranges = np.full(36, 5.0)
+    ranges[[34, 35, 0, 1, 2]] = 0.3                         # right in front, 0.3 m
+    safety = dict(HALLWAY_SAFETY, replan_after=1.0, blocked_after=2.0, give_way=False)
+    controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=None,
+                                   settings={"max_iter": 2}, grid=scene.grid, safety=safety)
+    state = np.array([2.0, 2.1, 0.0, 0.0, 0.0])
+    statuses, kept = [], []
+    for k, t in enumerate(np.arange(0.0, 14.0, 0.1)):
+        if k % 5 == 4:
+            kept.append((t, controller.new_path(scene.path + [0.0, 0.1 * (-1) ** k])))
+        controller.act(state, t, angles, ranges, np.zeros((0, 2)), np.zeros((0, 2)))
+        statuses.append((round(t, 1), controller.status_))
+    blocked = [t for t, status in statuses if status.startswith("blocked")]
+    assert blocked, statuses
+    assert all(same for t, same in kept if t < blocked[0] + 2.0), kept
+    assert controller.backups_ + controller.detours_ >= 1
+    first = blocked[0]
+    held = [status for t, status in statuses if first <= t < first + 2.0]
+    assert all(status.startswith("blocked") for status in held), held
+    assert any(not status.startswith("blocked") for t, status in statuses if t > first + 2.6)
+
+
+def test_a_route_elsewhere_starts_the_clocks_again():
+    reward = progress_reward(speed_effort=-1.0, turn_effort=-1.0)
+    scene = hall([])
+    angles = np.linspace(-math.pi, math.pi, 36, endpoint=False)
+    ranges = np.full(36, 5.0)
+    ranges[[34, 35, 0, 1, 2]] = 0.3
+    safety = dict(HALLWAY_SAFETY, replan_after=1.0, blocked_after=2.0, give_way=False)
+    controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=None,
+                                   settings={"max_iter": 2}, grid=scene.grid, safety=safety)
+    state = np.array([2.0, 2.1, 0.0, 0.0, 0.0])
+    for t in np.arange(0.0, 0.95, 0.1):
+        controller.act(state, t, angles, ranges, np.zeros((0, 2)), np.zeros((0, 2)))
+    # round the far side of a pillar 1 m behind: away from the way on
+    elsewhere = np.array([[2.0, 2.1], [1.0, 3.6], [0.5, 3.6], [0.5, 0.6], [11.0, 0.6]])
+    assert not controller.new_path(elsewhere)
+    controller.act(state, 1.0, angles, ranges, np.zeros((0, 2)), np.zeros((0, 2)))
+    assert controller.status_ == "turning to the path" and controller.backups_ == 0
+
+
 def test_along_a_detour_the_waypoint_never_skips_a_stretch_out_of_sight():
     # a U round something: the far leg is in sight across the gap, the bottom of the U is not
     path = np.array([[0.0, 0.0], [0.0, -1.0], [1.0, -1.0], [1.0, 0.0], [1.0, 3.0]])

@@ -1,6 +1,7 @@
 """reward_controller's path mode for real (roscore, roslaunch): with a hallway reward it follows
 a nav_msgs/Path, stops (zero speed) for what the scan shows inside its safety margin ahead and
-says so on /diagnostics."""
+says so on /diagnostics; held there while the path is re-planned the same way twice a second
+(as move_base does), it reports the path blocked."""
 import math
 
 import numpy as np
@@ -50,10 +51,11 @@ def scan_msg(nearest_ahead):
     return msg
 
 
-def test_path_mode_follows_the_path_and_stops_inside_the_safety_margin(rospy_node, roslaunch,
-                                                                       tmp_path):
-    launch = roslaunch("lfd_controller", "controller.launch", with_sim="false",
-                       reward_file=str(hallway_reward_file(tmp_path)))
+def test_path_mode_follows_the_path_stops_inside_the_safety_margin_and_reports_blocked(
+        rospy_node, roslaunch, tmp_path):
+    launch = roslaunch.node("lfd_controller", "reward_controller",
+                            params={"reward_file": str(hallway_reward_file(tmp_path)),
+                                    "frame": "odom", "blocked_after": 2.0})
     launch.wait_for_subscribers(["/path", "/scan", "/people", "/odom"], timeout=120)
     publishers = {name: rospy.Publisher(f"/{name}", kind, queue_size=2, latch=True)
                   for name, kind in (("odom", Odometry), ("scan", LaserScan), ("people", People),
@@ -71,7 +73,11 @@ def test_path_mode_follows_the_path_and_stops_inside_the_safety_margin(rospy_nod
     odom.pose.pose.orientation.w = 1.0
     ahead = {"range": 4.0}
 
+    replanning = {"on": False}
+
     def sensors():
+        if replanning["on"]:                   # the same way again, as move_base re-plans
+            publishers["path"].publish(path)
         odom.header.stamp = rospy.Time.now()
         publishers["odom"].publish(odom)
         publishers["scan"].publish(scan_msg(ahead["range"]))
@@ -88,3 +94,6 @@ def test_path_mode_follows_the_path_and_stops_inside_the_safety_margin(rospy_nod
     odom.twist.twist.linear.x = 0.3            # and the robot moving toward it
     wait_until(lambda: status(DiagnosticStatus.WARN, "stopped: scan") and cmd.msg.linear.x == 0.0,
                120, what="a zero speed and the reason")
+    replanning["on"] = True                    # held there, re-planned at every poll (<= 0.5 s)
+    wait_until(lambda: status(DiagnosticStatus.ERROR, "blocked") and cmd.msg.linear.x == 0.0,
+               120, what="the path reported blocked while re-planned the same way")

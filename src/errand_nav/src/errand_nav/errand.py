@@ -7,16 +7,20 @@ crowd forecast is due again. `with_obstacles` marks laser points on a copy of th
 re-plan goes round what blocked the path (move_base's obstacle layer does the same)."""
 import math
 from dataclasses import dataclass, field
-from typing import Optional, Sequence, Tuple
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from robot_common.maps import FREE, OCCUPIED, GridMap
+from robot_common.polylines import arc_lengths, nearest_arc
 
 __all__ = ["Errand", "ErrandRules", "Verdict", "with_obstacles", "remaining_path", "unmapped",
            "nearest_clear", "at_hour_of_week"]
 
 WEEK = 7 * 86400.0
+# Laser points kept as in the way: one per square this size (m); a robot held up for seconds
+# sees the same thing many times over.
+SIGHTING_CELL = 0.05
 
 
 def at_hour_of_week(now: float, hour: float) -> float:
@@ -60,16 +64,30 @@ class Errand:
     # what the laser showed in the way when the path was blocked (map frame), kept for the
     # errand so that a re-plan never returns to a way already found blocked
     obstacles: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    # what it showed since the robot last got on: held up, a controller trying its own
+    # recoveries may have turned its back on what holds it when the path counts as blocked
+    held_sightings: List[np.ndarray] = field(default_factory=list)
+
+    def sighted(self, points: np.ndarray) -> None:
+        """Laser points the map lacks, seen now; those since the last progress count as in the
+        way when the path is blocked."""
+        self.held_sightings.append(np.asarray(points, float).reshape(-1, 2))
 
     def saw_blocking(self, points: np.ndarray) -> np.ndarray:
-        """Add laser points seen in the way; all of them so far."""
-        self.obstacles = np.vstack([self.obstacles, np.asarray(points, float).reshape(-1, 2)])
+        """Add laser points seen in the way, and those seen since the last progress (one per
+        SIGHTING_CELL m square); all of them so far."""
+        seen = np.vstack([self.obstacles, np.asarray(points, float).reshape(-1, 2)]
+                         + self.held_sightings)
+        self.held_sightings = []
+        cells = np.unique(np.round(seen / SIGHTING_CELL).astype(np.int64), axis=0, return_index=True)[1]
+        self.obstacles = seen[np.sort(cells)]
         return self.obstacles
 
     def follow(self, path: np.ndarray, now: float) -> None:
         """A new path to follow from now on (progress is measured along it)."""
         self.path = np.asarray(path, float)
         self.best_remaining, self.last_progress, self.last_plan = math.inf, now, now
+        self.held_sightings = []
 
     def distance_to_goal(self, xy: Sequence[float]) -> float:
         return math.hypot(xy[0] - self.goal[0], xy[1] - self.goal[1])
@@ -78,7 +96,7 @@ class Errand:
         """Length (m) of the path left from the point of the path nearest `xy`."""
         if len(self.path) < 2:
             return self.distance_to_goal(xy)
-        return float(_remaining_length(self.path, np.asarray(xy, float)))
+        return float(arc_lengths(self.path)[-1] - nearest_arc(self.path, xy)[0])
 
     def check(self, xy: Sequence[float], now: float) -> Verdict:
         """The verdict for the robot at `xy` at time `now` (s)."""
@@ -87,24 +105,13 @@ class Errand:
         left = self.remaining(xy)
         if left < self.best_remaining - self.rules.progress_step:
             self.best_remaining, self.last_progress = left, now
+            self.held_sightings = []
         held = now - self.last_progress
         if held > self.rules.blocked_after:
             return Verdict("blocked", f"no progress for {held:.0f} s, {left:.1f} m from the goal")
         if now - self.last_plan >= self.rules.replan_period:
             return Verdict("forecast", f"{self.rules.replan_period:g} s since the last plan")
         return Verdict("go")
-
-
-def _remaining_length(path: np.ndarray, xy: np.ndarray) -> float:
-    starts, ends = path[:-1], path[1:]
-    seg = ends - starts
-    seg_len = np.hypot(seg[:, 0], seg[:, 1])
-    t = np.clip(np.einsum("ij,ij->i", xy - starts, seg) / np.maximum(seg_len ** 2, 1e-12), 0, 1)
-    nearest = starts + t[:, None] * seg
-    gap = np.hypot(*(nearest - xy).T)
-    best = int(np.argmin(gap))
-    after = seg_len[best + 1:].sum()
-    return float((1.0 - t[best]) * seg_len[best] + after)
 
 
 def remaining_path(path: np.ndarray, xy: Sequence[float]) -> np.ndarray:

@@ -26,6 +26,10 @@ from robot_common.maps import load_map, yaw_to_quaternion
 from robot_common.ros_maps import grid_to_msg, msg_to_grid
 from robot_common.ros_node import path_msg, pose_2d, read_config
 
+# Held up this long (s) without progress, the laser points the map lacks are kept: what the
+# robot saw while held counts as in the way when the path is blocked.
+HELD = 1.0
+
 __all__ = ["ErrandServer", "start"]
 
 
@@ -56,8 +60,10 @@ class ErrandServer:
     The plan goes out on ~plan (nav_msgs/Path, latched; each pose stamped with its expected
     pass time), which the controller follows. While driving: feedback (the robot's pose, from
     tf ~map_frame -> ~base_frame); held up for ~blocked_after s, the path is re-planned round
-    what the laser (`scan`) shows ahead, at most ~max_replans times; every ~replan_period s the
-    crowd forecast is asked again and a plan better by ~switch_gain is taken. Result: succeeded
+    what the laser (`scan`) showed the map lacks within ~obstacle_range while the robot was held
+    (the controller may have turned away from it by then), at most ~max_replans times; every
+    ~replan_period s the crowd forecast is asked again and a plan better by ~switch_gain is
+    taken. Result: succeeded
     within ~goal_tolerance of the goal; aborted with the reason (no path, blocked with no other
     path, no robot pose); preempted by a new goal or a cancel. Once a goal has ended (other than
     by a new goal) the controller is switched off through ~controller_enable (std_srvs/SetBool),
@@ -298,6 +304,11 @@ class ErrandServer:
     def step(self, errand: Errand, pose, now: float) -> Optional[Tuple[str, str]]:
         """One look at the errand; (outcome, text) when it ends."""
         verdict = errand.check(pose[:2], now)
+        with self.lock:
+            grid = self.planner.grid
+        if verdict.action == "go" and now - errand.last_progress >= HELD:
+            errand.sighted(unmapped(grid, self.scan_points(pose[:2], self.config.obstacle_range),
+                                    0.15))
         if verdict.action == "arrived":
             return "succeeded", f"reached the goal ({verdict.reason})"
         if verdict.action == "blocked":
@@ -305,10 +316,9 @@ class ErrandServer:
             if errand.replans > self.rules.max_replans:
                 return "aborted", (f"blocked: {verdict.reason}; gave up after "
                                    f"{self.rules.max_replans} new paths")
-            with self.lock:
-                grid = self.planner.grid
-            new = unmapped(grid, self.scan_points(pose[:2], self.config.obstacle_range), 0.15)
-            seen = errand.saw_blocking(new)
+            before = len(errand.obstacles)
+            seen = errand.saw_blocking(
+                unmapped(grid, self.scan_points(pose[:2], self.config.obstacle_range), 0.15))
             try:
                 planned = self.plan(pose[:2], errand.goal, now + self.crowd_offset,
                                     obstacles=seen)
@@ -316,7 +326,8 @@ class ErrandServer:
                 return "aborted", (f"blocked at ({pose[0]:.1f}, {pose[1]:.1f}): "
                                    f"{verdict.reason}; no other path: {err}")
             self.follow(errand, planned, now, f"re-planned at ({pose[0]:.1f}, {pose[1]:.1f}) "
-                                              f"round {len(new)} laser points the map lacks "
+                                              f"round {len(seen) - before} laser points the "
+                                              f"map lacks, seen held up "
                                               f"({len(seen)} this errand; {verdict.reason})")
         elif verdict.action == "forecast":
             self.reconsider(errand, pose, now)

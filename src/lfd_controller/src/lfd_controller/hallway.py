@@ -42,6 +42,7 @@ from lfd_controller.laplace import DemoDynamics
 from lfd_controller.planner import RecedingHorizonController
 from lfd_controller.rewards import RewardDerivatives
 from robot_common.maps import GridMap
+from robot_common.polylines import nearest_arc, same_way
 from robot_common.tasks import ObstacleMotion, Scenario
 
 __all__ = ["HALLWAY_DRIVING", "HALLWAY_SAFETY", "room_margin", "TaskBuilder", "HallwayBarrier",
@@ -98,6 +99,10 @@ PEOPLE_MEMORY = 12.0
 # included), after which the planner starts nothing new; the rest is headroom for a busy machine
 # (on 2 shared cores a cycle can lose tens of ms to other processes).
 PLANNING_SHARE = 0.6
+# A re-plan keeps to the way being driven when, over the look-ahead from the robot, it stays
+# within this much (m) of the old path (plus however far the robot is off it): a planner's
+# re-plans of one route differ by a cell or two, or by a swerve round someone in the hall.
+ROUTE_TOLERANCE = 0.5
 
 
 def hallway_scenario(dt: float = 0.1, name: str = "hallway") -> Scenario:
@@ -219,20 +224,46 @@ class HallwayController:
         self.detours_ = self.backups_ = self.give_ways_ = 0
         self._scans, self._scanned = deque(maxlen=int(SCAN_MEMORY / SCAN_EVERY)), -math.inf
         self._seen_people = deque(maxlen=int(PEOPLE_MEMORY / SCAN_EVERY))
-        self.new_path(self.path)
+        self._position, self._now = None, 0.0
+        self.path = np.asarray(self.path, float).reshape(-1, 2)
+        self._start(self.path)
 
-    def new_path(self, path) -> None:
-        """Follow `path` (a re-plan to the same goal) from now on, as a new controller would,
-        keeping what the robot saw (the scans and people that detours and giving way use) and
-        its recovery counts."""
-        self.path = np.asarray(path, float)
-        self.task = TaskBuilder(self.path, lookahead=self.safety["lookahead"],
+    def new_path(self, path) -> bool:
+        """Follow `path` (a re-plan to the same goal) from now on. A re-plan of the way being
+        driven (robot_common.polylines.same_way: within ROUTE_TOLERANCE m over the look-ahead)
+        only replaces the path: the progress and blocked clocks and a recovery under way go on
+        (move_base re-plans every second or so; a robot held up must still get to its
+        recoveries and report a blocked path), and a blocked robot stays stopped until it has
+        been blocked `blocked_after` s. A route elsewhere starts as a new controller would
+        (turning to it first), keeping what the robot saw (the scans and people that detours
+        and giving way use) and its recovery counts. True when the way was kept."""
+        path = np.asarray(path, float).reshape(-1, 2)
+        kept = self._position is not None and same_way(
+            self.path, path, self._position, ahead=self.safety["lookahead"],
+            tolerance=ROUTE_TOLERANCE)
+        retry = self.status_.startswith("blocked") and (
+            self._now - self._blocked_at >= self.safety["blocked_after"])
+        self.path = path
+        if not kept or retry:
+            self._start(path)
+        elif not self._detouring:       # a detour keeps going: it rejoins the same way
+            self.task = TaskBuilder(path, lookahead=self.safety["lookahead"],
+                                    laser_offset=self.laser_offset, through_goal=True)
+            self.follower = self.task.follower
+            self.follower.progress = nearest_arc(path, self._position)[0]
+            self._left = self.follower.length - self.follower.progress
+        return kept and not retry
+
+    def _start(self, path) -> None:
+        """Follow `path` from its start: the clocks start again and any recovery under way ends."""
+        self.task = TaskBuilder(path, lookahead=self.safety["lookahead"],
                                 laser_offset=self.laser_offset, through_goal=True)
         self.follower = self.task.follower
         self.status_, self.held_since_ = "following", None
         self._giving_way: Optional[GivingWay] = None
         self._left, self._getting_on, self._tried = math.inf, 0.0, 0.0
         self._recoveries, self._backing_until, self._turning = 0, -math.inf, True
+        self._detouring, self._blocked_at = False, math.inf
 
     @property
     def goal(self) -> np.ndarray:
@@ -286,7 +317,7 @@ class HallwayController:
         self.task.follower = self.follower = PathFollower(
             detour.path, lookahead=self.follower.lookahead, closely=detour.rejoins)
         self._left, self.detours_ = self.follower.length, self.detours_ + 1
-        self._turning = True
+        self._turning = self._detouring = True
         return True
 
     @property
@@ -295,6 +326,7 @@ class HallwayController:
 
     def act(self, state, t: float, angles, ranges, people, velocities) -> np.ndarray:
         state = np.asarray(state, float)
+        self._position, self._now = state[:2].copy(), float(t)
         if np.hypot(*(self.goal - state[:2])) < self.goal_tolerance:
             self.status_ = "arrived"
             return np.zeros(2)
@@ -369,6 +401,7 @@ class HallwayController:
         return np.array([0.0, math.copysign(min(TURN_RATE, 2.0 * abs(bearing)), bearing)])
 
     def _blocked(self, held: float) -> np.ndarray:
+        self._blocked_at = min(self._blocked_at, self._now)
         self.status_ = (f"blocked: held up {held:.0f} s at {self.follower.progress:.1f} of "
                         f"{self.follower.length:.1f} m ({self.detours_} detours, "
                         f"{self.backups_} backing up tried)")

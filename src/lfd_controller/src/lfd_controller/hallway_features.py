@@ -28,6 +28,7 @@ import numpy as np
 from lfd_controller.errors import LfdError
 from lfd_controller.features import FeatureValues, as_trajectory
 from lfd_controller.jets import Jet
+from robot_common.polylines import arc_lengths, nearest_arc, point_at
 
 __all__ = ["HALLWAY_STATE_FEATURES", "HALLWAY_SIGNS", "HallwayTask", "HallwayFeatures",
            "PathFollower", "in_sight", "scan_points"]
@@ -179,8 +180,7 @@ class PathFollower:
             raise LfdError("a path needs at least one point")
         if not lookahead > 0:
             raise LfdError(f"the waypoint look-ahead must be positive, got {lookahead!r}")
-        steps = np.hypot(*np.diff(self.path, axis=0).T) if len(self.path) > 1 else np.zeros(0)
-        self.arc = np.concatenate([[0.0], np.cumsum(steps)])
+        self.arc = arc_lengths(self.path)
         self.lookahead, self.window = float(lookahead), float(window)
         self.closely, self.progress = float(closely), 0.0
 
@@ -189,8 +189,7 @@ class PathFollower:
         return float(self.arc[-1])
 
     def point_at(self, s: float) -> np.ndarray:
-        s = float(np.clip(s, 0.0, self.length))
-        return np.array([np.interp(s, self.arc, self.path[:, i]) for i in (0, 1)])
+        return point_at(self.path, s, self.arc)
 
     def update(self, position, visible: Optional[Callable[[np.ndarray], bool]] = None
                ) -> np.ndarray:
@@ -223,15 +222,7 @@ class PathFollower:
     def _nearest(self, position, near) -> float:
         """Arc length of the point nearest `position` on the segments starting at `near`."""
         first, last = int(near[0]), min(int(near[-1]) + 1, len(self.path) - 1)
-        if last <= first:
-            return float(self.arc[first])
-        a, b = self.path[first:last], self.path[first + 1:last + 1]
-        span = b - a
-        length2 = np.maximum((span ** 2).sum(axis=1), 1e-12)
-        along = np.clip(((position - a) * span).sum(axis=1) / length2, 0.0, 1.0)
-        gaps = np.hypot(*(a + along[:, None] * span - position).T)
-        k = int(np.argmin(gaps))
-        return float(self.arc[first + k] + along[k] * np.sqrt(length2[k]))
+        return float(self.arc[first] + nearest_arc(self.path[first:last + 1], position)[0])
 
     def distance_to_path(self, position) -> float:
         return float(np.hypot(*(self.point_at(self.progress) - np.asarray(position, float)[:2])))

@@ -42,9 +42,10 @@ class HallwayControllerNode:
       ~laser_offset (0.1 m), ~person_radius (0.25 m), ~barrier_margin (0.1 m).
     Topics in: odom (nav_msgs/Odometry, pose in the path's frame), path (nav_msgs/Path: the
       global plan, e.g. move_base's; followed from its first pose; one ending within
-      ~goal_tolerance of the current goal is a re-plan, keeping the controller), goal
-      (geometry_msgs/PoseStamped: planned on the map with robot_common.gridplan when no path
-      comes), map (nav_msgs/OccupancyGrid, latched), scan (sensor_msgs/LaserScan), people
+      ~goal_tolerance of the current goal is a re-plan, keeping the controller: along the same
+      way it keeps the progress and blocked clocks too), goal (geometry_msgs/PoseStamped:
+      planned on the map with robot_common.gridplan when no path comes; sent again, it retries
+      a blocked path at once), map (nav_msgs/OccupancyGrid, latched), scan (sensor_msgs/LaserScan), people
       (robot_common/People: tracked positions and velocities, the layout of people_msgs/People).
     Topics out: cmd_vel (geometry_msgs/Twist), ~cycle_time (std_msgs/Float64), /diagnostics
       (diagnostic_msgs/DiagnosticArray, name "reward_controller: path"): OK following (progress,
@@ -53,7 +54,8 @@ class HallwayControllerNode:
       (in place, on a new path or after a detour or backing up, toward a waypoint behind it),
       giving way (to a spot out of the way, or waiting there, of someone who stopped for the
       robot) or no path, ERROR blocked (stood still ~blocked_after s, or no 0.3 m of progress
-      for 3 x that, detours and backing up tried: the robot stays stopped until a new path).
+      for 3 x that, detours and backing up tried: the robot stays stopped until a path another
+      way, a goal, or a re-plan once it has been blocked ~blocked_after s).
     Services: ~enable (std_srvs/SetBool).
     """
 
@@ -82,25 +84,30 @@ class HallwayControllerNode:
         self.timer = rospy.Timer(rospy.Duration(1.0 / self.config.rate), self.tick)
         return self
 
-    def follow(self, points: np.ndarray, source: str) -> None:
+    def follow(self, points: np.ndarray, source: str, *, retry: bool = False) -> None:
         """Follow `points`: a re-plan to the goal being driven to keeps the controller (what it
-        saw on its way, its recovery counts); another goal starts a new one."""
+        saw on its way, its recovery counts; HallwayController.new_path); another goal, or
+        `retry` (a goal sent again) after a blocked path, starts a new one."""
         with self.lock:
             controller = self.controller
-            if controller is not None and not controller.status_.startswith("arrived") and \
+            ended = controller is None or controller.status_.startswith("arrived") or (
+                retry and controller.status_.startswith("blocked"))
+            if not ended and \
                     np.hypot(*(controller.path[-1] - points[-1])) <= self.config.goal_tolerance:
-                controller.new_path(points)
-                replan = "a re-plan: "
+                same = controller.new_path(points)
+                replan = "a re-plan along the same way: " if same else "a re-plan: "
             else:
                 controller = self.controller = HallwayController(
                     self.reward, points, self.model, budget=1.0 / self.config.rate,
                     goal_tolerance=self.config.goal_tolerance,
                     laser_offset=self.config.laser_offset, settings=self.settings,
                     safety=self.config.hallway_safety(), grid=self.grid)
-                replan = ""
-            self.source, self.status = source, "following"
-        rospy.loginfo(f"reward_controller: following {replan}{source} ({len(points)} poses, "
-                      f"{controller.follower.length:.1f} m)")
+                replan, same = "", False
+            self.source, self.status = source, controller.status_
+        # move_base re-plans the same way every second or so: only a change of way is news
+        log = rospy.logdebug if same else rospy.loginfo
+        log(f"reward_controller: following {replan}{source} ({len(points)} poses, "
+            f"{controller.follower.length:.1f} m)")
 
     def on_path(self, msg: Path) -> None:
         points = np.array([[p.pose.position.x, p.pose.position.y] for p in msg.poses])
@@ -123,7 +130,7 @@ class HallwayControllerNode:
                 self.controller, self.status = None, f"no path: {err}"
             self.cmd.publish(Twist())
             return
-        self.follow(points, f"a planned path to ({goal[0]:.1f}, {goal[1]:.1f})")
+        self.follow(points, f"a planned path to ({goal[0]:.1f}, {goal[1]:.1f})", retry=True)
 
     def on_map(self, msg: OccupancyGrid) -> None:
         grid = msg_to_grid(msg)

@@ -1,5 +1,6 @@
 """The workspace's shared vocabulary (no ROS): maps and map files, cells and time of week,
-the unicycle model, navigation-task geometry, errors and the node-parameter convention.
+the unicycle model, navigation-task geometry, paths as polylines (`robot_common.polylines`),
+errors and the node-parameter convention.
 
 `robot_common.paths.ros_home` resolves $ROS_HOME. The ROS-side helpers live in
 `robot_common.ros_node` and `robot_common.ros_maps` (they import rospy)."""

@@ -26,29 +26,15 @@ import numpy as np
 
 from robot_common.gridplan import NoPathError, clearance_map, path_length, plan_path
 from robot_common.maps import GridMap, raycast
+from robot_common.polylines import arc_lengths, points_along
 from robot_sim.crowd import disc_ranges
 from robot_sim.errors import SimError
 
-__all__ = ["PEOPLE_KINDS", "Walker", "HallwayScene", "make_scene", "route_along", "Observation",
+__all__ = ["PEOPLE_KINDS", "Walker", "HallwayScene", "make_scene", "Observation",
            "DriveResult", "observe", "drive", "hall_points", "keep_side", "PERSON_RADIUS"]
 
 PEOPLE_KINDS = ("head_on", "overtaking", "overtaken", "crossing", "group", "stepping_out")
 PERSON_RADIUS = 0.25
-
-
-def arc_lengths(points: np.ndarray) -> np.ndarray:
-    """The arc length of a polyline (N, 2) at each of its points."""
-    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
-
-
-def route_along(points: np.ndarray, distances: np.ndarray,
-                arc: Optional[np.ndarray] = None) -> np.ndarray:
-    """Points (len(distances), 2) at these arc lengths along a polyline (clipped to its ends);
-    `arc`: its `arc_lengths` when known."""
-    points = np.asarray(points, float)
-    arc = arc_lengths(points) if arc is None else arc
-    distances = np.clip(np.asarray(distances, float), 0.0, arc[-1])
-    return np.column_stack([np.interp(distances, arc, points[:, i]) for i in (0, 1)])
 
 
 @dataclass
@@ -94,7 +80,7 @@ class Walker:
     def position(self, t: float) -> np.ndarray:
         if self.speed <= 0 or len(self.route) < 2:
             return np.asarray(self.route[0], float).copy()
-        return route_along(self.route, [self.walked(t) * self.speed], self.arc())[0]
+        return points_along(self.route, [self.walked(t) * self.speed], self.arc())[0]
 
     def velocity(self, t: float, span: float = 0.1) -> np.ndarray:
         if self.holding or self.speed <= 0:
@@ -296,8 +282,8 @@ def _walkers(scene: HallwayScene, kind: str, rng, index: int, room: int) -> List
     """People of one kind (a group may be 2-3 of them; `room` is how many may still come)."""
     path, total = scene.path, scene.length
     along = rng.uniform(0.3, 0.8) * total
-    point = route_along(path, [along])[0]
-    tangent = route_along(path, [along + 0.5])[0] - route_along(path, [along - 0.5])[0]
+    point = points_along(path, [along])[0]
+    tangent = points_along(path, [along + 0.5])[0] - points_along(path, [along - 0.5])[0]
     tangent = tangent / max(float(np.hypot(*tangent)), 1e-9)
     normal = np.array([-tangent[1], tangent[0]])
     speed = rng.uniform(0.8, 1.3)
@@ -333,7 +319,7 @@ def _walkers(scene: HallwayScene, kind: str, rng, index: int, room: int) -> List
     side = 1.0 if rng.random() < 0.5 else -1.0
     off = _wall_end(scene, point, side * normal)
     stations = np.linspace(along, min(total, along + 8.0), 10)
-    route = np.vstack([[off], route_along(path, stations)])
+    route = np.vstack([[off], points_along(path, stations)])
     return [Walker(name, "stepping_out", route, rng.uniform(0.6, 1.0),
                    depart=max(0.0, robot_eta - 4.0))]
 
@@ -342,7 +328,7 @@ def keep_side(grid: GridMap, path: np.ndarray, stations: np.ndarray, side: float
               wanted: float = 0.75) -> np.ndarray:
     """Points at `stations` along the path, `wanted` m to the `side` (+1 left, -1 right) of it,
     less where the hall is narrower (a person's radius + 0.1 m from the wall)."""
-    points = route_along(path, stations)
+    points = points_along(path, stations)
     normals = side * _normals(path, stations)
     reach = np.array([raycast(grid, float(p[0]), float(p[1]),
                               np.array([math.atan2(n[1], n[0])]), wanted + 1.0)[0]
@@ -352,7 +338,7 @@ def keep_side(grid: GridMap, path: np.ndarray, stations: np.ndarray, side: float
 
 
 def _normals(path: np.ndarray, stations: np.ndarray) -> np.ndarray:
-    ahead = route_along(path, stations + 0.5) - route_along(path, stations - 0.5)
+    ahead = points_along(path, stations + 0.5) - points_along(path, stations - 0.5)
     ahead = ahead / np.maximum(np.hypot(*ahead.T), 1e-9)[:, None]
     return np.column_stack([-ahead[:, 1], ahead[:, 0]])
 
@@ -371,7 +357,7 @@ def _clutter(scene: HallwayScene, rng, count: int) -> np.ndarray:
     items = []
     for _ in range(count):
         along = rng.uniform(0.25, 0.85) * scene.length
-        point = route_along(scene.path, [along])[0]
+        point = points_along(scene.path, [along])[0]
         normal = _normals(scene.path, np.array([along]))[0]
         radius = rng.uniform(0.2, 0.35)
         for offset in (0.3, -0.3, 0.6, -0.6):
