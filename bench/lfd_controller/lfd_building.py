@@ -218,8 +218,9 @@ def table():
         total = {key: sum(t[key] for t in truth) for key in truth[0]}
         print(f"giving way against the simulator's truth ({len(truth)} drives): "
               f"{total['right']} with someone near waiting for the robot, {total['wrong']} "
-              f"without; of {total['standoffs']} standoffs (someone near waiting while the robot "
-              f"stood {WAIT_LONG:g} s), {total['missed']} without giving way")
+              f"without; of {total['standoffs']} standoffs (someone near and in front waiting "
+              f"while the robot stood held up {WAIT_LONG:g} s), {total['missed']} without "
+              f"giving way")
     if cycles8:
         print(f"\ncycle time with 8 people, 0.1 s budget: {len(cycles8)} cycles, p50 "
               f"{np.percentile(cycles8, 50) * 1000:.0f} ms, p99 {np.percentile(cycles8, 99) * 1000:.0f} ms, "

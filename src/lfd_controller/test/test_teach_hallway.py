@@ -1,6 +1,8 @@
 """teach_hallway's command line: a reward learned from one short simulated drive is written and
 loads as reward_controller loads it, with the barrier margin it was checked with; bad floors
 get one ERROR line and no file."""
+import math
+
 import pytest
 import yaml
 
@@ -79,4 +81,11 @@ def test_giving_way_is_scored_against_who_really_waited_for_the_robot():
     for t in np.arange(5.3, 6.0, 0.1):    # a wait too short to count
         near.holding = True
         waits.step(standing, t, False)
+    waits.step(moving, 6.0, False)
+    for t in np.arange(6.1, 11.0, 0.1):   # 5 s turning to its path: not held up
+        waits.step(standing, t, False, held=False)
+    waits.step(moving, 11.0, False)
+    facing_away = np.array([2.0, 2.0, math.pi, 0.0, 0.0])
+    for t in np.arange(11.1, 16.0, 0.1):  # 5 s held with them behind it: no standoff either
+        waits.step(facing_away, t, False)
     assert waits.figures() == {"right": 1, "wrong": 1, "standoffs": 1, "missed": 1}

@@ -19,6 +19,7 @@ SAVED_SETTINGS). Progress on stderr; exit 1 with one `ERROR:` line when no drive
 the reward is refused (`--accept-anyway` saves a refused reward, saying so in the file).
 """
 import argparse
+import math
 import sys
 import time
 from dataclasses import dataclass, field
@@ -104,7 +105,8 @@ def drive_learner(scene: HallwayScene, reward, budget: Optional[float] = 0.1,
         gave_way = controller.give_ways_
         command = controller.act(state, t, seen.angles, seen.ranges, seen.people, seen.velocities)
         cycles.append(time.perf_counter() - started)
-        waits.step(state, t, controller.give_ways_ > gave_way)
+        waits.step(state, t, controller.give_ways_ > gave_way,
+                   controller.status_.startswith(("waiting", "stopped")))
         return command
     figures = drive_figures(drive(scene, policy))
     figures["cycles"] = cycles
@@ -118,7 +120,8 @@ def drive_learner(scene: HallwayScene, reward, budget: Optional[float] = 0.1,
 class WaitsForRobot:
     """The simulator's truth about giving way: whether someone near the robot was really
     waiting for it (`Walker.holding`) when the controller gave way, and the standoffs - someone
-    near waiting for the robot while it stood, for WAIT_LONG s or more - in which it never did."""
+    near and in front (within 90 deg of its heading) waiting for the robot while it stood held
+    up (not turning to its path), for WAIT_LONG s or more - in which it never did."""
 
     def __init__(self, scene: HallwayScene):
         self.scene = scene
@@ -127,16 +130,20 @@ class WaitsForRobot:
         self.missed = self.standoffs = 0
         self.last = 0.0
 
-    def step(self, state, t: float, gave_way: bool) -> None:
-        """The robot at `state` at time `t`; `gave_way`: the controller began giving way."""
+    def step(self, state, t: float, gave_way: bool, held: bool = True) -> None:
+        """The robot at `state` at time `t`; `gave_way`: the controller began giving way;
+        `held`: it is held up (waiting or stopped, not turning to its path)."""
         self.last = t
         waiting = {i for i, walker in enumerate(self.scene.people)
                    if walker.holding and walker.present(t)
                    and np.hypot(*(walker.position(t) - state[:2])) <= WAIT_NEAR}
         if gave_way:
             self.right, self.wrong = self.right + bool(waiting), self.wrong + (not waiting)
-        if abs(state[3]) >= STANDING and not gave_way:
-            waiting = set()         # it drives on: no standoff
+        if (abs(state[3]) >= STANDING or not held) and not gave_way:
+            waiting = set()         # it drives on, or turns to its path: no standoff
+        heading = np.array([math.cos(state[2]), math.sin(state[2])])
+        waiting = {i for i in waiting
+                   if np.dot(self.scene.people[i].position(t) - state[:2], heading) > 0.0}
         for i in waiting:
             self.waits.setdefault(i, [t, False])[1] |= gave_way
         for i in [i for i in self.waits if i not in waiting]:
@@ -149,7 +156,8 @@ class WaitsForRobot:
 
     def figures(self) -> Dict[str, int]:
         """right / wrong: give-ways with / without someone near waiting for the robot;
-        standoffs: of WAIT_LONG s or more; missed: those it never gave way in."""
+        standoffs: of WAIT_LONG s or more (someone in front waiting while it was held up);
+        missed: those it never gave way in (1 - missed / standoffs: its recall)."""
         for wait in list(self.waits.values()):
             self._end(wait, self.last)
         self.waits = {}
