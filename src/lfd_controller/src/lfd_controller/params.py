@@ -109,7 +109,8 @@ class RewardControllerParams(NodeConfig):
     blocked_after: float = param(20.0, "path mode: stood still this long (s), or without 0.3 m "
                                        "of progress along the path for 3 x as long, the path is "
                                        "reported blocked (ERROR on /diagnostics) and the robot "
-                                       "stays stopped until a new path or goal")
+                                       "stays stopped until a path another way, a goal, or a "
+                                       "re-plan once it has stood blocked this long")
     replan_after: float = param(4.0, "path mode: without 0.3 m of progress this long (s), follow "
                                      "a detour planned on ~map and the scan round what blocks "
                                      "the path, the next time back up 0.3 m first (if nothing "
