@@ -203,6 +203,28 @@ def test_re_plans_of_the_same_way_keep_the_clocks_a_held_robot_reports_blocked_a
     assert any(not status.startswith("blocked") for t, status in statuses if t > first + 2.6)
 
 
+def test_a_detour_goes_on_through_re_plans_of_the_same_way_until_it_rejoins_the_path():
+    reward = progress_reward(speed_effort=-1.0, turn_effort=-1.0)
+    scene = hall(cup(), length=12.0)
+    controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=None,
+                                   settings={"max_iter": 2}, grid=scene.grid,
+                                   safety=dict(HALLWAY_SAFETY, replan_after=1.0, give_way=False))
+    nobody = (np.zeros((0, 2)), np.zeros((0, 2)))
+    state = np.array([4.0, 2.1, 0.0, 0.0, 0.0])                # in the cup's mouth, held
+    for t in np.arange(0.0, 1.5, 0.1):
+        controller.act(state, t, *seen_from(scene, state)[1:3], *nobody)
+    assert controller.detours_ == 1
+    detour = controller.follower.path
+    replan = scene.path + [0.0, 0.1]                            # the same way, a cell over
+    assert controller.new_path(replan)
+    assert controller.follower.path is detour                   # still going round the cup
+    for k, point in enumerate(detour[detour[:, 0] <= 10.0]):   # round it, back on the path
+        state = np.array([point[0], point[1], 0.0, 0.3, 0.0])
+        controller.act(state, 1.5 + 0.1 * k, *seen_from(scene, state)[1:3], *nobody)
+    assert controller.new_path(replan)
+    assert np.array_equal(controller.follower.path, replan)
+
+
 def test_a_route_elsewhere_starts_the_clocks_again():
     reward = progress_reward(speed_effort=-1.0, turn_effort=-1.0)
     scene = hall([])

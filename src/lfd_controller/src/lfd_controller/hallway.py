@@ -246,12 +246,13 @@ class HallwayController:
         self.path = path
         if not kept or retry:
             self._start(path)
-        elif not self._detouring:       # a detour keeps going: it rejoins the same way
+        elif not self._on_detour:       # a detour keeps going until it rejoins the same way
             self.task = TaskBuilder(path, lookahead=self.safety["lookahead"],
                                     laser_offset=self.laser_offset, through_goal=True)
             self.follower = self.task.follower
             self.follower.progress = nearest_arc(path, self._position)[0]
             self._left = self.follower.length - self.follower.progress
+            self._detour_until = -math.inf
         return kept and not retry
 
     def _start(self, path) -> None:
@@ -263,7 +264,7 @@ class HallwayController:
         self._giving_way: Optional[GivingWay] = None
         self._left, self._getting_on, self._tried = math.inf, 0.0, 0.0
         self._recoveries, self._backing_until, self._turning = 0, -math.inf, True
-        self._detouring, self._blocked_at = False, math.inf
+        self._detour_until, self._blocked_at = -math.inf, math.inf
 
     @property
     def goal(self) -> np.ndarray:
@@ -317,8 +318,13 @@ class HallwayController:
         self.task.follower = self.follower = PathFollower(
             detour.path, lookahead=self.follower.lookahead, closely=detour.rejoins)
         self._left, self.detours_ = self.follower.length, self.detours_ + 1
-        self._turning = self._detouring = True
+        self._turning, self._detour_until = True, detour.rejoins
         return True
+
+    @property
+    def _on_detour(self) -> bool:
+        """On a detour's own stretch, before it rejoins the path."""
+        return self.follower.progress < self._detour_until
 
     @property
     def cycle_times_(self) -> List[float]:
