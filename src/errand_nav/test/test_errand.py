@@ -58,11 +58,14 @@ def test_what_the_laser_showed_while_held_counts_as_in_the_way_and_progress_forg
     job.check((1.0, 0.0), 0.0)
     job.sighted(np.array([[3.0, 0.5], [7.0, 0.0]]))            # seen, then the robot got on
     assert job.check((2.0, 0.0), 2.0).action == "go"
-    job.sighted(np.array([[2.6, 0.0], [2.61, 0.01]]))           # held: a cart, twice in a cell
-    job.sighted(np.zeros((0, 2)))                               # turned away from it
-    seen = job.saw_blocking(np.array([[2.6, -0.3]]))
-    assert sorted(map(tuple, seen.round(2))) == [(2.6, -0.3), (2.6, 0.0)]
-    assert len(job.saw_blocking(np.zeros((0, 2)))) == 2         # kept for the errand, once
+    for look in range(3):                                       # held: a cart, seen 3 times
+        job.sighted(np.array([[2.6, 0.0], [2.61, 0.01]]) + 0.01 * look)
+    job.sighted(np.array([[2.6, 0.8]]))                         # someone walking past
+    job.sighted(np.array([[2.6, 1.2]]))
+    job.sighted(np.zeros((0, 2)))                               # turned away from the cart
+    seen = job.saw_blocking(np.array([[2.6, -0.3]]))            # what it sees now counts anyway
+    assert sorted(map(tuple, seen.round(2))) == [(2.6, -0.3), (2.6, 0.0), (2.63, 0.03)]
+    assert len(job.saw_blocking(np.zeros((0, 2)))) == 3         # kept for the errand, once
 
 
 def test_a_forecast_look_comes_every_period_while_driving():

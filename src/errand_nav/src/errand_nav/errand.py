@@ -19,8 +19,10 @@ __all__ = ["Errand", "ErrandRules", "Verdict", "with_obstacles", "remaining_path
 
 WEEK = 7 * 86400.0
 # Laser points kept as in the way: one per square this size (m); a robot held up for seconds
-# sees the same thing many times over.
-SIGHTING_CELL = 0.05
+# sees the same thing many times over. Of what it saw while held, only what stood still: a
+# STILL_CELL m square seen in STILL_SIGHTINGS looks or more (someone walking past crosses one
+# in a look or two at the server's 5 per second).
+SIGHTING_CELL, STILL_CELL, STILL_SIGHTINGS = 0.05, 0.25, 3
 
 
 def at_hour_of_week(now: float, hour: float) -> float:
@@ -74,12 +76,13 @@ class Errand:
         self.held_sightings.append(np.asarray(points, float).reshape(-1, 2))
 
     def saw_blocking(self, points: np.ndarray) -> np.ndarray:
-        """Add laser points seen in the way, and those seen since the last progress (one per
-        SIGHTING_CELL m square); all of them so far."""
-        seen = np.vstack([self.obstacles, np.asarray(points, float).reshape(-1, 2)]
-                         + self.held_sightings)
+        """Add laser points seen in the way now, and those that stood still since the last
+        progress (_standing_still), one per SIGHTING_CELL m square; all of them so far."""
+        seen = np.vstack([self.obstacles, np.asarray(points, float).reshape(-1, 2),
+                          _standing_still(self.held_sightings)])
         self.held_sightings = []
-        cells = np.unique(np.round(seen / SIGHTING_CELL).astype(np.int64), axis=0, return_index=True)[1]
+        cells = np.unique(np.round(seen / SIGHTING_CELL).astype(np.int64), axis=0,
+                          return_index=True)[1]
         self.obstacles = seen[np.sort(cells)]
         return self.obstacles
 
@@ -112,6 +115,20 @@ class Errand:
         if now - self.last_plan >= self.rules.replan_period:
             return Verdict("forecast", f"{self.rules.replan_period:g} s since the last plan")
         return Verdict("go")
+
+
+def _standing_still(sightings: List[np.ndarray]) -> np.ndarray:
+    """The points of `sightings` (each (N, 2)) in STILL_CELL m squares that STILL_SIGHTINGS or
+    more of them saw."""
+    if not sightings:
+        return np.zeros((0, 2))
+    points = np.vstack(sightings)
+    cells = np.floor(points / STILL_CELL).astype(np.int64)
+    looks = np.repeat(np.arange(len(sightings)), [len(s) for s in sightings])
+    pairs = np.unique(np.column_stack([cells, looks]), axis=0)        # a square once per look
+    squares, counts = np.unique(pairs[:, :2], axis=0, return_counts=True)
+    still = {tuple(square) for square in squares[counts >= STILL_SIGHTINGS]}
+    return points[[tuple(cell) in still for cell in cells]].reshape(-1, 2)
 
 
 def remaining_path(path: np.ndarray, xy: Sequence[float]) -> np.ndarray:

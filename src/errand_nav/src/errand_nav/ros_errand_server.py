@@ -60,8 +60,9 @@ class ErrandServer:
     The plan goes out on ~plan (nav_msgs/Path, latched; each pose stamped with its expected
     pass time), which the controller follows. While driving: feedback (the robot's pose, from
     tf ~map_frame -> ~base_frame); held up for ~blocked_after s, the path is re-planned round
-    what the laser (`scan`) showed the map lacks within ~obstacle_range while the robot was held
-    (the controller may have turned away from it by then), at most ~max_replans times; every
+    what the laser (`scan`) shows the map lacks within ~obstacle_range, and what stood still
+    there while the robot was held (the controller may have turned away from it by then), at
+    most ~max_replans times; every
     ~replan_period s the crowd forecast is asked again and a plan better by ~switch_gain is
     taken. Result: succeeded
     within ~goal_tolerance of the goal; aborted with the reason (no path, blocked with no other
