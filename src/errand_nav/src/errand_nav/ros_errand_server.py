@@ -62,13 +62,12 @@ class ErrandServer:
     tf ~map_frame -> ~base_frame); held up for ~blocked_after s, the path is re-planned round
     what the laser (`scan`) shows the map lacks within ~obstacle_range, and what stood still
     there while the robot was held (the controller may have turned away from it by then), at
-    most ~max_replans times; every
-    ~replan_period s the crowd forecast is asked again and a plan better by ~switch_gain is
-    taken. Result: succeeded
-    within ~goal_tolerance of the goal; aborted with the reason (no path, blocked with no other
-    path, no robot pose); preempted by a new goal or a cancel. Once a goal has ended (other than
-    by a new goal) the controller is switched off through ~controller_enable (std_srvs/SetBool),
-    as move_base stops commanding; a new goal switches it on.
+    most ~max_replans times; every ~replan_period s the crowd forecast is asked again and a
+    plan better by ~switch_gain is taken. Result: succeeded within ~goal_tolerance of the
+    goal; aborted with the reason (no path, blocked with no other path, no robot pose);
+    preempted by a new goal or a cancel. Once a goal has ended (other than by a new goal) the
+    controller is switched off through ~controller_enable (std_srvs/SetBool), as move_base
+    stops commanding; a new goal switches it on.
 
     Also: ~make_plan (nav_msgs/GetPlan; start.header.stamp is the departure time, zero: now;
     an empty start frame: the robot's pose), ~go_to_place (errand_nav/GoToPlace: a phrase

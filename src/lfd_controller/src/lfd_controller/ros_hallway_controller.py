@@ -45,8 +45,9 @@ class HallwayControllerNode:
       ~goal_tolerance of the current goal is a re-plan, keeping the controller: along the same
       way it keeps the progress and blocked clocks too), goal (geometry_msgs/PoseStamped:
       planned on the map with robot_common.gridplan when no path comes; sent again, it retries
-      a blocked path at once), map (nav_msgs/OccupancyGrid, latched), scan (sensor_msgs/LaserScan), people
-      (robot_common/People: tracked positions and velocities, the layout of people_msgs/People).
+      a blocked path at once), map (nav_msgs/OccupancyGrid, latched), scan
+      (sensor_msgs/LaserScan), people (robot_common/People: tracked positions and velocities,
+      the layout of people_msgs/People).
     Topics out: cmd_vel (geometry_msgs/Twist), ~cycle_time (std_msgs/Float64), /diagnostics
       (diagnostic_msgs/DiagnosticArray, name "reward_controller: path"): OK following (progress,
       waypoint) / arrived, WARN stopped (zero speed, turning allowed: what the scan shows inside
