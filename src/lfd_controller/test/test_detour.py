@@ -6,6 +6,7 @@ import math
 import numpy as np
 
 from lfd_controller.detour import plan_detour, plan_give_way, scan_window
+from lfd_controller.give_way import people_holding
 from lfd_controller.hallway import HALLWAY_SAFETY, HallwayController
 from lfd_controller.hallway_features import HallwayFeatures, PathFollower
 from lfd_controller.rewards import LinearReward
@@ -256,6 +257,20 @@ def test_along_a_detour_the_waypoint_never_skips_a_stretch_out_of_sight():
     assert close[0] <= 0.2 + 1e-9 and close[1] <= -0.5  # stops where the U goes out of sight
 
 
+def test_with_track_names_a_passer_by_does_not_make_a_standing_group_wait_for_the_robot():
+    robot = np.array([0.0, 0.0, 0.0, 0.0, 0.0])
+    still = np.zeros((2, 2))
+    standing = np.array([[1.0, 0.3], [1.0, -0.3]])          # in front: a group, and one who came
+    earlier = [(np.array([[1.0, 0.3], [1.0, 1.0], [3.0, -0.3]]),   # the group, a passer-by,
+                np.array([[0.0, 0.0], [0.8, 0.0], [-0.8, 0.0]]),   # "came" still walking up
+                ["group", "passer", "came"])]
+    assert people_holding(robot, standing, still, earlier).tolist() == [True, False]
+    named = people_holding(robot, standing, still, earlier, names=["group", "came"])
+    assert named.tolist() == [False, True]
+    untracked = people_holding(robot, standing, still, earlier, names=["", "came"])
+    assert untracked.tolist() == [True, True]               # no name: the old rule
+
+
 def test_giving_way_goes_aside_away_from_whoever_waits_and_never_toward_them():
     scene = hall([])
     follower = PathFollower(scene.path, lookahead=4.0)
@@ -302,8 +317,9 @@ def meet_at_mouth(give_way: bool):
                                    grid=scene.grid, safety=dict(HALLWAY_SAFETY, give_way=give_way))
     gaps = []
 
-    def policy(state, t, seen):
-        command = controller.act(state, t, seen.angles, seen.ranges, seen.people, seen.velocities)
+    def policy(state, t, seen):        # with the tracker's names: the same walker walked up
+        command = controller.act(state, t, seen.angles, seen.ranges, seen.people, seen.velocities,
+                                 seen.names)
         if controller.status_.startswith("giving way") and len(seen.people):
             gaps.append(float(np.hypot(*(seen.people[0] - state[:2]))))
         return command

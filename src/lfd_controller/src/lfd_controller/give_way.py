@@ -17,31 +17,41 @@ import numpy as np
 __all__ = ["people_holding", "GivingWay"]
 
 # A person standing (slower than STILL m/s) within HOLD_REACH m of the robot, in front of it,
-# who was walking (a tracked person at WALKING m/s or more within ARRIVED m of them) in the
-# last seconds the caller keeps, holds it up: they stopped for the robot (people standing in a
-# group all along do not wait for anybody). Giving way drives at SPEED m/s (turning in place
-# first when the way on is more than TURN rad off), for at most DRIVE s, then waits up to WAIT
-# s for the spot where the robot was held to clear (nobody within CLEAR m of it).
+# who was walking (at WALKING m/s or more) in the last seconds the caller keeps, holds it up:
+# they stopped for the robot (people standing in a group all along do not wait for anybody).
+# A tracked person (a name) walked when the same track did; an untracked one when someone
+# walked within ARRIVED m of where they stand - which a passer-by beside a group also does.
+# Giving way drives at SPEED m/s (turning in place first when the way on is more than TURN rad
+# off), for at most DRIVE s, then waits up to WAIT s for the spot where the robot was held to
+# clear (nobody within CLEAR m of it).
 HOLD_REACH, STILL, WALKING, ARRIVED = 1.2, 0.2, 0.4, 1.0
 SPEED, TURN, DRIVE = 0.2, math.radians(60.0), 10.0
 WAIT, CLEAR = 6.0, 1.0
 
 
-def people_holding(state, people, velocities, earlier=(), *, reach: float = HOLD_REACH
-                   ) -> np.ndarray:
+def people_holding(state, people, velocities, earlier=(), *, names=None,
+                   reach: float = HOLD_REACH) -> np.ndarray:
     """Which of `people` (P, 2) stand within `reach` m in front of the robot at `state` (x, y,
-    yaw, ...) and had walked up: some earlier report in `earlier` ((people, velocities) pairs,
-    tracks have no names) has someone walking within ARRIVED m of where they stand."""
+    yaw, ...) and had walked up, by some earlier report in `earlier` ((people, velocities) or
+    (people, velocities, names)): with a track name (`names`, people_msgs/Person.name; "" for
+    an untracked detection) the same track was walking; without one, someone was walking within
+    ARRIVED m of where they stand."""
     people = np.asarray(people, float).reshape(-1, 2)
     speeds = np.hypot(*np.asarray(velocities, float).reshape(-1, 2).T)
     offset = people - np.asarray(state[:2], float)
     ahead = offset @ np.array([math.cos(state[2]), math.sin(state[2])]) > 0.0
+    names = list(names) if names is not None else [""] * len(people)
     walked = np.zeros(len(people), bool)
-    for before, moving in earlier:
-        before = np.asarray(before, float).reshape(-1, 2)
-        walking = before[np.hypot(*np.asarray(moving, float).reshape(-1, 2).T) >= WALKING]
-        for point in walking:
-            walked |= np.hypot(*(people - point).T) <= ARRIVED
+    for report in earlier:
+        before = np.asarray(report[0], float).reshape(-1, 2)
+        moving = np.hypot(*np.asarray(report[1], float).reshape(-1, 2).T) >= WALKING
+        tracks = report[2] if len(report) > 2 and report[2] is not None else None
+        walking_names = {n for n, m in zip(tracks, moving) if m and n} if tracks else set()
+        for i, name in enumerate(names):
+            if name and tracks is not None:
+                walked[i] |= name in walking_names
+            else:
+                walked[i] |= bool(np.any(np.hypot(*(before[moving] - people[i]).T) <= ARRIVED))
     return (np.hypot(*offset.T) <= reach) & ahead & (speeds < STILL) & walked
 
 

@@ -270,7 +270,7 @@ class HallwayController:
     def goal(self) -> np.ndarray:
         return self.follower.path[-1]
 
-    def _detour(self, state, t: float, angles, ranges, people, velocities) -> bool:
+    def _detour(self, state, t: float, angles, ranges, people, velocities, names=None) -> bool:
         """Keep the scans and the progress clocks; after `replan_after` s without PROGRESS_STEP m
         of progress (and as often again while none comes) follow a detour (detour.plan_detour,
         on the floor map and the scans) or, every other time, back up first. True when the
@@ -278,7 +278,8 @@ class HallwayController:
         laser = laser_pose(state, self.laser_offset)
         if t - self._scanned >= SCAN_EVERY:
             self._scans.append((laser, np.asarray(angles, float), np.asarray(ranges, float)))
-            self._seen_people.append((np.asarray(people, float), np.asarray(velocities, float)))
+            self._seen_people.append((np.asarray(people, float), np.asarray(velocities, float),
+                                      None if names is None else list(names)))
             self._scanned = t
         left = self.follower.length - self.follower.progress
         if left < self._left - PROGRESS_STEP:
@@ -290,7 +291,7 @@ class HallwayController:
         self._tried, self._recoveries = t, self._recoveries + 1
         scans = list(self._scans)[:-1] + [(laser, angles, ranges)]
         clearance = self._detour_clearance
-        holding = people_holding(state, people, velocities, self._seen_people)
+        holding = people_holding(state, people, velocities, self._seen_people, names=names)
         if self.safety.get("give_way", True) and holding.any():    # someone waits for it
             spot = plan_give_way(self.follower, state[:2], np.asarray(people)[holding], scans,
                                  clearance=clearance, grid=self.grid)
@@ -330,7 +331,11 @@ class HallwayController:
     def cycle_times_(self) -> List[float]:
         return self.planner.cycle_times_
 
-    def act(self, state, t: float, angles, ranges, people, velocities) -> np.ndarray:
+    def act(self, state, t: float, angles, ranges, people, velocities,
+            names: Optional[Sequence[str]] = None) -> np.ndarray:
+        """The command at `state` (x, y, yaw, v, w), time `t` (s), from the scan (angles in the
+        laser frame, ranges) and the tracked people (map frame; `names`: their track names,
+        "" untracked, when the tracker gives them)."""
         state = np.asarray(state, float)
         self._position, self._now = state[:2].copy(), float(t)
         if np.hypot(*(self.goal - state[:2])) < self.goal_tolerance:
@@ -340,7 +345,8 @@ class HallwayController:
             return np.zeros(2)
         started = time.perf_counter()
         task = self.task(state, t, angles, ranges, people, velocities)
-        if self._giving_way is None and self._detour(state, t, angles, ranges, people, velocities):
+        if self._giving_way is None and self._detour(state, t, angles, ranges, people, velocities,
+                                                     names):
             task = self.task(state, t, angles, ranges, people, velocities)
         if t - self._getting_on >= PROGRESS_PATIENCE * self.safety["blocked_after"]:
             return self._blocked(t - self._getting_on)

@@ -46,8 +46,9 @@ class HallwayControllerNode:
       way it keeps the progress and blocked clocks too), goal (geometry_msgs/PoseStamped:
       planned on the map with robot_common.gridplan when no path comes; sent again, it retries
       a blocked path at once), map (nav_msgs/OccupancyGrid, latched), scan
-      (sensor_msgs/LaserScan), people (robot_common/People: tracked positions and velocities,
-      the layout of people_msgs/People).
+      (sensor_msgs/LaserScan), people (robot_common/People: tracked positions, velocities and
+      track names, the layout of people_msgs/People; a name tells giving way that the same
+      person walked up and stopped).
     Topics out: cmd_vel (geometry_msgs/Twist), ~cycle_time (std_msgs/Float64), /diagnostics
       (diagnostic_msgs/DiagnosticArray, name "reward_controller: path"): OK following (progress,
       waypoint) / arrived, WARN stopped (zero speed, turning allowed: what the scan shows inside
@@ -67,7 +68,7 @@ class HallwayControllerNode:
         self.enabled = config.enabled
         self.controller: Optional[HallwayController] = None
         self.state = self.scan = self.grid = None
-        self.people = (np.zeros((0, 2)), np.zeros((0, 2)))
+        self.people = (np.zeros((0, 2)), np.zeros((0, 2)), [])
         self.status = "no path"
         self.origin = time.monotonic()
 
@@ -150,7 +151,7 @@ class HallwayControllerNode:
             self.scan = scan
 
     def on_people(self, msg: People) -> None:
-        people = people_arrays(msg)
+        people = people_arrays(msg) + ([person.name for person in msg.people],)
         with self.lock:
             self.people = people
 
@@ -170,7 +171,7 @@ class HallwayControllerNode:
             return
         started = time.perf_counter()
         command = controller.act(state[0], time.monotonic() - self.origin, scan[0], scan[1],
-                                 people[0], people[1])
+                                 *people)
         self.cycle.publish(Float64(time.perf_counter() - started))
         twist = Twist()
         twist.linear.x, twist.angular.z = float(command[0]), float(command[1])

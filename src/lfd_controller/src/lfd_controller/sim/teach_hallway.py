@@ -103,7 +103,8 @@ def drive_learner(scene: HallwayScene, reward, budget: Optional[float] = 0.1,
     def policy(state, t, seen):
         started = time.perf_counter()
         gave_way = controller.give_ways_
-        command = controller.act(state, t, seen.angles, seen.ranges, seen.people, seen.velocities)
+        command = controller.act(state, t, seen.angles, seen.ranges, seen.people, seen.velocities,
+                                 seen.names)
         cycles.append(time.perf_counter() - started)
         waits.step(state, t, controller.give_ways_ > gave_way,
                    controller.status_.startswith(("waiting", "stopped")))
