@@ -247,19 +247,21 @@ class HallwayController:
         if not kept or retry:
             self._start(path)
         elif not self._on_detour:       # a detour keeps going until it rejoins the same way
-            self.task = TaskBuilder(path, lookahead=self.safety["lookahead"],
-                                    laser_offset=self.laser_offset, through_goal=True)
-            self.follower = self.task.follower
+            self._follow(path)
             self.follower.progress = nearest_arc(path, self._position)[0]
             self._left = self.follower.length - self.follower.progress
             self._detour_until = -math.inf
         return kept and not retry
 
-    def _start(self, path) -> None:
-        """Follow `path` from its start: the clocks start again and any recovery under way ends."""
+    def _follow(self, path) -> None:
+        """Build each cycle's task, and the waypoint follower, along `path`."""
         self.task = TaskBuilder(path, lookahead=self.safety["lookahead"],
                                 laser_offset=self.laser_offset, through_goal=True)
         self.follower = self.task.follower
+
+    def _start(self, path) -> None:
+        """Follow `path` from its start: the clocks start again and any recovery under way ends."""
+        self._follow(path)
         self.status_, self.held_since_ = "following", None
         self._giving_way: Optional[GivingWay] = None
         self._left, self._getting_on, self._tried = math.inf, 0.0, 0.0
