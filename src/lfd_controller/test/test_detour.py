@@ -6,7 +6,7 @@ import math
 import numpy as np
 
 from lfd_controller.detour import plan_detour, plan_give_way, scan_window
-from lfd_controller.give_way import people_holding
+from lfd_controller.give_way import people_holding, ways_on
 from lfd_controller.hallway import HALLWAY_SAFETY, HallwayController
 from lfd_controller.hallway_features import HallwayFeatures, PathFollower
 from lfd_controller.rewards import LinearReward
@@ -292,6 +292,68 @@ def test_giving_way_goes_aside_away_from_whoever_waits_and_never_toward_them():
     assert plan_give_way(follower, [4.0, 0.7], [[4.6, 0.7]],
                          [seen_from(narrow, (4.0, 0.7, 0.0))], clearance=0.28,
                          grid=narrow.grid) is None
+
+
+def distance_to_ray(point, start, way):
+    """How far `point` is from the ray from `start` along the unit vector `way`."""
+    offset = np.asarray(point, float) - np.asarray(start, float)
+    along = max(float(offset @ way), 0.0)
+    return float(np.hypot(*(offset - along * np.asarray(way, float))))
+
+
+def test_giving_way_keeps_off_where_the_waiting_person_walks_on():
+    scene = hall([])
+    follower = PathFollower(scene.path, lookahead=4.0)
+    follower.update([4.0, 2.1])
+    person = np.array([4.6, 1.6])           # in front, to the right: waits to walk through
+    toward = (np.array([4.0, 2.1]) - person) / np.hypot(0.6, 0.5)
+    seen = [seen_from(scene, (4.0, 2.1, 0.0))]
+    spot = plan_give_way(follower, [4.0, 2.1], [person], seen, clearance=0.28,
+                         grid=scene.grid)[-1]
+    assert distance_to_ray(spot, person, toward) >= 1.0 - 0.05      # a cell's slack
+    # the way their track was walking counts too
+    walked = np.array([-0.8, 0.6])
+    spot = plan_give_way(follower, [4.0, 2.1], [person], seen, clearance=0.28, ways=[walked],
+                         grid=scene.grid)[-1]
+    assert min(distance_to_ray(spot, person, toward),
+               distance_to_ray(spot, person, walked)) >= 1.0 - 0.05
+
+
+def test_the_way_a_tracked_person_was_walking_is_their_track_s_latest():
+    earlier = [(np.array([[3.0, 0.0]]), np.array([[-0.8, 0.0]]), ["a"]),
+               (np.array([[2.0, 0.5]]), np.array([[0.0, 0.6]]), ["a"]),      # turned
+               (np.array([[2.0, 1.0]]), np.array([[0.0, 0.0]]), ["a"])]      # stopped
+    ways = ways_on([[2.0, 1.0], [5.0, 5.0]], earlier, names=["a", "b"])
+    assert np.allclose(ways[0], [0.0, 1.0]) and np.isnan(ways[1]).all()
+    assert np.isnan(ways_on([[2.0, 1.0]], earlier)).all()                 # no names: unknown
+
+
+def test_still_in_the_way_at_its_spot_the_robot_moves_on_to_another():
+    scene = hall([])
+    controller = HallwayController(progress_reward(), scene.path, Unicycle(0.1), budget=None,
+                                   grid=scene.grid)
+    model, state = Unicycle(0.1), np.array([4.0, 2.1, 0.0, 0.0, 0.0])
+    person, still = np.array([6.0, 2.1]), np.zeros(2)
+    statuses = []
+    for step in range(300):
+        t = 0.1 * step
+        if controller.give_ways_ == 0:          # held up by someone who walks up and stops
+            state = np.array([4.0, 2.1, 0.0, 0.0, 0.0])
+            person = np.array([max(6.0 - 0.8 * t, 4.7), 2.1])
+            velocity = np.array([-0.8, 0.0]) if person[0] > 4.7 else still
+        elif statuses[-1] == "giving way: waiting for people to pass" and \
+                statuses.count(statuses[-1]) == 1:  # at its spot, they walk up to it again
+            toward = np.array([4.0, 2.1]) - state[:2]   # from where it was held up
+            person, velocity = state[:2] + 0.7 * toward / np.hypot(*toward), still
+        command = controller.act(state, t, ANGLES, scene.scan(state, t, ANGLES, 8.0), [person],
+                                 [velocity], ["p"])
+        statuses.append(controller.status_)
+        if statuses[-2:] == ["giving way: waiting for people to pass",
+                             "giving way: to a spot out of the way"]:
+            break
+        state = model.step(state, command)
+    assert controller.give_ways_ == 1 and "giving way: waiting for people to pass" in statuses
+    assert statuses[-1] == "giving way: to a spot out of the way"        # moved on
 
 
 def mouth(length=9.0, wide=4.0, narrow=1.2, at=4.0):

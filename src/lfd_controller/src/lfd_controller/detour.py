@@ -95,16 +95,18 @@ def plan_detour(path_follower, position, scans: Sequence, *, clearance: float,
 
 
 def plan_give_way(path_follower, position, people, scans, *, clearance: float,
-                  reach: float = 2.5, aside: float = 0.8, clear: float = 1.0,
+                  ways=None, reach: float = 2.5, aside: float = 0.8, clear: float = 1.0,
                   comfort: float = 0.6, wall_cost: float = 2.0, tries: int = 5,
                   grid: Optional[GridMap] = None) -> Optional[np.ndarray]:
     """A path (N, 2) from `position` to the nearest spot, within `reach` m, out of the way of
     `people` (P, 2) who wait for the robot: on the robot's far side from them (it makes way by
     moving away, not past them), `aside` m from the path's stretch round the robot (3 m back,
-    4 m on: they come along it), `clear` m from each of them, kept `clearance` m from what
-    scan_window(`scans`, `grid`) shows; None when no such spot can be reached (the `tries`
-    nearest are tried; the way there is dearer near them, and one longer than `reach` + 1 m,
-    or coming closer to them than the robot is, does not count)."""
+    4 m on: they come along it), `clear` m from each of them and from where each will walk on
+    (straight lines: toward the robot and on past it - who waits for a robot has it in their
+    way - and the way they were walking, `ways`: unit vectors (P, 2), NaN unknown), kept
+    `clearance` m from what scan_window(`scans`, `grid`) shows; None when no such spot can be
+    reached (the `tries` nearest are tried; the way there is dearer near them, and one longer
+    than `reach` + 1 m, or coming closer to them than the robot is, does not count)."""
     position = np.asarray(position, float)[:2]
     grid = scan_window(scans, centre=position, half_width=reach + 1.0, grid=grid)
     cost = _step_costs(grid, position, clearance, comfort, wall_cost)
@@ -115,7 +117,9 @@ def plan_give_way(path_follower, position, people, scans, *, clearance: float,
         (xs - position[0]) * towards[0] + (ys - position[1]) * towards[1] <= 0.0)
     stretch = [path_follower.point_at(s) for s in np.arange(
         path_follower.progress - 3.0, path_follower.progress + 4.0, 0.1)]
-    for points, room in ((stretch, aside), (people, clear)):
+    walks = [person + along * way for person, way in _ways_on(people, position, ways)
+             for along in np.arange(0.0, np.hypot(*(person - position)) + reach + 1.0, 0.1)]
+    for points, room in ((stretch, aside), (people, clear), (walks, clear)):
         for x, y in points:
             spots &= np.hypot(xs - x, ys - y) >= room
     if len(people):     # the way there keeps off them: dearer the nearer it comes
@@ -129,6 +133,18 @@ def plan_give_way(path_follower, position, people, scans, *, clearance: float,
                 len(people) and _nearest(points, people) < now - grid.resolution):
             return points
     return None
+
+
+def _ways_on(people: np.ndarray, position: np.ndarray, ways=None):
+    """(person, unit vector) pairs: each person toward `position`, and along `ways` (P, 2)
+    where it is known (not NaN)."""
+    pairs = []
+    for index, person in enumerate(people):
+        toward = position - person
+        pairs.append((person, toward / max(float(np.hypot(*toward)), 1e-9)))
+        if ways is not None and np.all(np.isfinite(ways[index])):
+            pairs.append((person, np.asarray(ways[index], float)))
+    return pairs
 
 
 def _nearest(points: np.ndarray, people: np.ndarray) -> float:

@@ -3,10 +3,12 @@
 People who meet a robot in a door or a narrow hall often stop and wait for it to move; a robot
 that then waits for them, or backs up along their way, is in a waiting game nobody wins. A
 person who walked up and stopped close in front of a held-up robot (`people_holding`) is taken
-as waiting for it:
-the robot drives to the nearest spot out of the way of people coming along its path
-(detour.plan_give_way), waits there until the spot where it was held is clear (or `WAIT` s),
-and then rejoins its path (the controller plans a detour back to it).
+as waiting for it: the robot drives to the nearest spot out of the way of people coming along
+its path and of where those waiting will walk on (toward the robot and past it, and the way
+their track was walking: `ways_on`; detour.plan_give_way), waits there until the spot where it
+was held is clear (or `WAIT` s), and then rejoins its path (the controller plans a detour back
+to it). When someone comes up to it at its spot and waits there too, it was still in their
+way: it moves on to another spot (`GivingWay.in_the_way`).
 """
 import math
 from dataclasses import dataclass
@@ -14,7 +16,7 @@ from typing import Optional
 
 import numpy as np
 
-__all__ = ["people_holding", "GivingWay"]
+__all__ = ["people_holding", "ways_on", "GivingWay"]
 
 # A person standing (slower than STILL m/s) within HOLD_REACH m of the robot, in front of it,
 # who was walking (at WALKING m/s or more) in the last seconds the caller keeps, holds it up:
@@ -24,9 +26,13 @@ __all__ = ["people_holding", "GivingWay"]
 # Giving way drives at SPEED m/s (turning in place first when the way on is more than TURN rad
 # off), for at most DRIVE s, then waits up to WAIT s for the spot where the robot was held to
 # clear (nobody within CLEAR m of it).
+# Someone standing within CLEAR m of the robot MOVE_ON s after it got to its spot (which was
+# CLEAR m from everybody) came up to it there and waits: it is still in their way, and moves
+# on to another spot, at most MOVES times in one act of giving way.
 HOLD_REACH, STILL, WALKING, ARRIVED = 1.2, 0.2, 0.4, 1.0
 SPEED, TURN, DRIVE = 0.2, math.radians(60.0), 10.0
 WAIT, CLEAR = 6.0, 1.0
+MOVE_ON, MOVES = 2.0, 2
 
 
 def people_holding(state, people, velocities, earlier=(), *, names=None,
@@ -55,6 +61,25 @@ def people_holding(state, people, velocities, earlier=(), *, names=None,
     return (np.hypot(*offset.T) <= reach) & ahead & (speeds < STILL) & walked
 
 
+def ways_on(people, earlier=(), *, names=None) -> np.ndarray:
+    """Unit vectors (P, 2): the way each of `people` (P, 2) was last walking, by their track
+    (`names`, in `earlier` as for people_holding); NaN where no track of theirs was seen
+    walking."""
+    ways = np.full((len(np.asarray(people, float).reshape(-1, 2)), 2), np.nan)
+    names = list(names) if names is not None else [""] * len(ways)
+    for report in earlier:       # oldest first: the latest walking report wins
+        tracks = report[2] if len(report) > 2 and report[2] is not None else None
+        if not tracks:
+            continue
+        velocities = np.asarray(report[1], float).reshape(-1, 2)
+        speeds = np.hypot(*velocities.T)
+        walking = {n: v / s for n, v, s in zip(tracks, velocities, speeds) if n and s >= WALKING}
+        for i, name in enumerate(names):
+            if name in walking:
+                ways[i] = walking[name]
+    return ways
+
+
 @dataclass
 class GivingWay:
     """One act of giving way: `path` (N, 2) to the spot, `held_at` (x, y) where the robot was
@@ -64,6 +89,16 @@ class GivingWay:
     held_at: np.ndarray
     since: float
     arrived: Optional[float] = None
+    moves: int = 0          # spots moved on to after the first
+
+    def in_the_way(self, state, t: float, people, velocities) -> np.ndarray:
+        """Which of `people` (P, 2) stand within CLEAR m of the robot at its spot MOVE_ON s
+        after it got there (while it may still move on): it is still in their way."""
+        people = np.asarray(people, float).reshape(-1, 2)
+        if self.arrived is None or t - self.arrived < MOVE_ON or self.moves >= MOVES:
+            return np.zeros(len(people), bool)
+        speeds = np.hypot(*np.asarray(velocities, float).reshape(-1, 2).T)
+        return (np.hypot(*(people - np.asarray(state[:2], float)).T) < CLEAR) & (speeds < STILL)
 
     def command(self, state, t: float, people) -> Optional[np.ndarray]:
         """The command this cycle: toward the spot (pure pursuit), then zero while waiting;

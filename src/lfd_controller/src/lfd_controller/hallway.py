@@ -29,7 +29,7 @@ from lfd_controller.cioc import LinearCIOC
 from lfd_controller.demos import Demonstration
 from lfd_controller.detour import plan_detour, plan_give_way
 from lfd_controller.errors import LfdError
-from lfd_controller.give_way import GivingWay, people_holding
+from lfd_controller.give_way import MOVES, GivingWay, people_holding, ways_on
 from lfd_controller.hallway_features import (
     HALLWAY_SIGNS,
     HallwayFeatures,
@@ -295,8 +295,7 @@ class HallwayController:
         clearance = self._detour_clearance
         holding = people_holding(state, people, velocities, self._seen_people, names=names)
         if self.safety.get("give_way", True) and holding.any():    # someone waits for it
-            spot = plan_give_way(self.follower, state[:2], np.asarray(people)[holding], scans,
-                                 clearance=clearance, grid=self.grid)
+            spot = self._spot_aside(state, people, names, holding, scans)
             if spot is not None:
                 self._giving_way = GivingWay(spot, np.array(state[:2], float), t)
                 self.give_ways_ += 1
@@ -306,6 +305,15 @@ class HallwayController:
             self._turning = True
             return False
         return self._rejoin(state, scans, clearance)
+
+    def _spot_aside(self, state, people, names, waiting, scans) -> Optional[np.ndarray]:
+        """The way to a spot out of the way of the `waiting` (mask) of `people`
+        (detour.plan_give_way, with the ways they walked by give_way.ways_on), or None."""
+        who = np.asarray(people, float).reshape(-1, 2)[waiting]
+        ways = ways_on(who, self._seen_people,
+                       names=None if names is None else np.asarray(names)[waiting])
+        return plan_give_way(self.follower, state[:2], who, scans, ways=ways,
+                             clearance=self._detour_clearance, grid=self.grid)
 
     @property
     def _detour_clearance(self) -> float:
@@ -353,7 +361,7 @@ class HallwayController:
         if t - self._getting_on >= PROGRESS_PATIENCE * self.safety["blocked_after"]:
             return self._blocked(t - self._getting_on)
         if self._giving_way is not None:
-            command = self._give_way(state, t, angles, ranges, people)
+            command = self._give_way(state, t, angles, ranges, people, velocities, names)
             if command is not None:
                 return command
             task = self.task(state, t, angles, ranges, people, velocities)
@@ -382,9 +390,19 @@ class HallwayController:
         self.status_ = "waiting"
         return command
 
-    def _give_way(self, state, t: float, angles, ranges, people) -> Optional[np.ndarray]:
+    def _give_way(self, state, t: float, angles, ranges, people, velocities,
+                  names=None) -> Optional[np.ndarray]:
         """The command while giving way (the safety stop applies), or None once done: then
-        back to the path by a detour from where the robot is."""
+        back to the path by a detour from where the robot is. Still in someone's way at its
+        spot (GivingWay.in_the_way), it moves on to another spot out of their way."""
+        waiting = self._giving_way.in_the_way(state, t, people, velocities)
+        if waiting.any():
+            scans = list(self._scans) + [(laser_pose(state, self.laser_offset), angles, ranges)]
+            spot = self._spot_aside(state, people, names, waiting, scans)
+            moves = self._giving_way.moves + 1 if spot is not None else MOVES
+            if spot is not None:
+                self._giving_way = GivingWay(spot, self._giving_way.held_at, t)
+            self._giving_way.moves = moves
         command = self._giving_way.command(state, t, people)
         self._tried, self.held_since_ = t, None
         if command is None:
