@@ -27,6 +27,15 @@ fixed without F's drives):
     the person's; the learned controller's cycle time (wall clock, whole cycle: scan points,
     waypoint, planning) over the scenes with 8 people.
 
+Two time limits, both tables from the same drives: the scene's own (the path at 0.2 m/s plus
+20 s) and the person's pace limit - the path at two thirds of the person's pace (their median
+moving speed, which the learned controller cruises at) plus 20 s, never less than the scene's.
+A person who drives at 0.2 m/s has no time left under the first for anybody in the way, and
+neither has a controller that learned their pace; the second asks every controller in the row
+to arrive at that person's pace with half as long again for the crowd. The person, the learned
+controller and cloning drive until the pace limit; social force and DWA (shared by the
+families) until twice the scene's limit.
+
 Transfer: `--train levine_4th_good` has the person teach on that real floor instead and tests on
 the other (`--tests` names test maps); settings are still chosen on the generated building.
 
@@ -98,12 +107,22 @@ def view_policy(act_on_task, scene):
     return policy
 
 
-def drive_baseline(scene, controller):
-    return drive_figures(drive(scene, view_policy(controller.act, scene)))
+# The pace limit (module docstring): the path at PACE_SHARE of the person's pace plus 20 s;
+# the shared baselines drive until BASELINE_LIMIT times the scene's limit.
+PACE_SHARE, BASELINE_LIMIT = 2.0 / 3.0, 2.0
 
 
-def drive_cloning(scene, policy):
-    return drive_figures(drive(scene, view_policy(policy.predict, scene)))
+def pace_limit(scene, pace: float) -> float:
+    """The time (s) allowed at the person's `pace` (m/s): never less than the scene's."""
+    return max(scene.max_time, scene.length / (PACE_SHARE * pace) + 20.0)
+
+
+def drive_baseline(scene, controller, max_time=None):
+    return drive_figures(drive(scene, view_policy(controller.act, scene), max_time=max_time))
+
+
+def drive_cloning(scene, policy, max_time=None):
+    return drive_figures(drive(scene, view_policy(policy.predict, scene), max_time=max_time))
 
 
 def shared_baselines(scene, sf, dwa):
@@ -112,7 +131,9 @@ def shared_baselines(scene, sf, dwa):
     path = out_dir() / "baseline_drives" / (scene.name.replace("/", "_") + ".json")
     if path.exists():
         return json.loads(path.read_text())
-    drives = {"social_force": drive_baseline(scene, sf), "sampling": drive_baseline(scene, dwa)}
+    longest = BASELINE_LIMIT * scene.max_time
+    drives = {"social_force": drive_baseline(scene, sf, longest),
+              "sampling": drive_baseline(scene, dwa, longest)}
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_suffix(f".{os.getpid()}.part")
     partial.write_text(json.dumps(drives, default=float))
@@ -157,21 +178,24 @@ def family_row(family, train_grid, tests, sf, dwa, validation, demos_wanted):
             score = success_score([drive_cloning(s, policy) for s in validation[:2]])
             if score > best:
                 cloning, best = policy, score
-    rows = []
+    rows, pace = [], float(np.median(taught.speeds))
     for floor, grid in tests:
         for index, scene in enumerate(scenes(grid, floor, range(2000, 2000 + ARGS.scenes))):
+            longest = pace_limit(scene, pace)
             row = {"floor": floor, "scene": scene.name, "people": len(scene.people),
-                   "length": round(scene.length, 1)}
-            row["person"] = drive_figures(hallway_demonstration(person, scene)[0])
-            row["learned"] = drive_learner(scene, reward, margin=margin)
+                   "length": round(scene.length, 1), "limit": scene.max_time,
+                   "pace_limit": longest}
+            row["person"] = drive_figures(hallway_demonstration(person, scene, longest)[0])
+            row["learned"] = drive_learner(scene, reward, margin=margin, max_time=longest)
             if index < ARGS.baseline_scenes:
-                row["cloning"] = drive_cloning(scene, cloning)
+                row["cloning"] = drive_cloning(scene, cloning, longest)
                 row.update(shared_baselines(scene, sf, dwa))
             rows.append(row)
             print(f"{family} {scene.name} people={row['people']} "
                   + " ".join(f"{k}={row[k]['success']}/{row[k]['collision']}/{row[k]['time']:.0f}"
                              for k in METHODS if k in row), flush=True)
     return {"family": family, "demos": len(taught.demo_scenes), "windows": len(taught.windows),
+            "pace": pace,
             "margin": margin, "learn_cpu_s": taught.learn_cpu, "acceptance": verdict,
             "weights": dict(zip(reward.features.names, map(float, reward.weights))), "rows": rows}
 
@@ -179,33 +203,54 @@ def family_row(family, train_grid, tests, sf, dwa, validation, demos_wanted):
 METHODS = ("person", "learned", "cloning", "social_force", "sampling")
 
 
+def within(run, row, limit):
+    """The drive `run` of `row` cut at `limit` ("limit": the scene's, "pace_limit": the
+    person's pace): (reached the goal in time without collision, collided in time)."""
+    allowed = row[limit] + 1e-6
+    return (bool(run["success"] and run["time"] <= allowed),
+            run["collision"] is not None and run.get("ended", 0.0) <= allowed)
+
+
+def family_cells(data, limit):
+    """The table cells of one family's rows under `limit`."""
+    rows = data["rows"]
+    cells = []
+    for method in METHODS:
+        runs = [within(r[method], r, limit) for r in rows if method in r]
+        cells.append(f"{sum(ok for ok, _ in runs)}/{len(runs)} "
+                     f"({sum(hit for _, hit in runs)} coll.)")
+    both = [r for r in rows if within(r["learned"], r, limit)[0]
+            and within(r["person"], r, limit)[0]]
+    times = {m: np.median([r[m]["time"] for r in both]) if both else np.nan
+             for m in ("learned", "person")}
+    ratio = f"{times['learned'] / times['person']:.2f}x" if both else "-"
+    room = (f"{np.median([r['learned']['closest'] for r in both]):.2f} vs "
+            f"{np.median([r['person']['closest'] for r in both]):.2f}" if both else "-")
+    verdict = "accepted" if data["acceptance"]["accepted"] else \
+        "refused: " + "; ".join(data["acceptance"]["failures"])
+    return (f"| {data['family']} | {len(rows)} | " + " | ".join(cells)
+            + f" | {ratio} | {room} | {verdict} |")
+
+
 def table():
-    print("| family | floor drives | " + " | ".join(METHODS) + " | learned time x person | "
-          "closest learned vs person (median m) | acceptance |")
-    print("|" + " --- |" * (len(METHODS) + 5))
+    families = [json.loads(path.read_text()) for path in sorted(out_dir().glob("*.json"))
+                if path.name != "baselines.json"]
+    for limit, title in (("limit", "the scene's time limit (the path at 0.2 m/s plus 20 s)"),
+                         ("pace_limit", "the person's pace limit (the path at two thirds of "
+                                        "the person's pace plus 20 s)")):
+        print(f"\nWithin {title}:\n")
+        print("| family | floor drives | " + " | ".join(METHODS) + " | learned time x person | "
+              "closest learned vs person (median m) | acceptance |")
+        print("|" + " --- |" * (len(METHODS) + 5))
+        for data in families:
+            if all(limit in r for r in data["rows"]):
+                print(family_cells(data, limit))
+    paces = ", ".join(f"{d['family']} {d['pace']:.2f}" for d in families if "pace" in d)
+    if paces:
+        print(f"\nthe people's paces (m/s): {paces}")
     cycles8, recovered = [], []
-    for path in sorted(out_dir().glob("*.json")):
-        if path.name == "baselines.json":
-            continue
-        data = json.loads(path.read_text())
+    for data in families:
         rows = data["rows"]
-        cells = []
-        for method in METHODS:
-            runs = [r[method] for r in rows if method in r]
-            hits = sum(r["collision"] is not None for r in runs)
-            cells.append(f"{sum(r['success'] for r in runs)}/{len(runs)} ({hits} coll.)")
-        both = [(r["learned"]["time"], r["person"]["time"]) for r in rows
-                if r["learned"]["success"] and r["person"]["success"]]
-        ratio = (f"{np.median([a for a, _ in both]) / np.median([b for _, b in both]):.2f}x"
-                 if both else "-")
-        close = [(r["learned"]["closest"], r["person"]["closest"]) for r in rows
-                 if r["learned"]["success"] and r["person"]["success"]]
-        room = (f"{np.median([a for a, _ in close]):.2f} vs {np.median([b for _, b in close]):.2f}"
-                if close else "-")
-        verdict = "accepted" if data["acceptance"]["accepted"] else \
-            "refused: " + "; ".join(data["acceptance"]["failures"])
-        print(f"| {data['family']} | {len(rows)} | " + " | ".join(cells)
-              + f" | {ratio} | {room} | {verdict} |")
         cycles8 += [c for r in rows if r["people"] == 8 for c in r["learned"]["cycles"]]
         recovered += [r["learned"] for r in rows if "recoveries" in r["learned"]]
     for kind in ("detours", "backing_up", "giving_way"):

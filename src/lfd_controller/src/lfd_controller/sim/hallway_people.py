@@ -99,8 +99,10 @@ def hallway_demonstration(driver: HallwayDriver, scene: HallwayScene,
 
 
 def drive_figures(result: DriveResult, dt: float = 0.1) -> Dict:
-    """{success, collision, time, closest}: closest is the smallest edge-to-edge distance to a
-    person over the drive (inf: nobody near)."""
+    """{success, collision, time, ended, closest}: time to the goal (NaN: not reached), when
+    the drive ended (the goal, a collision or the time limit); closest is the smallest
+    edge-to-edge distance to a person over the drive (inf: nobody near)."""
     return {"success": bool(result.success), "collision": result.collision,
             "time": len(result.actions) * dt if result.reached else float("nan"),
+            "ended": len(result.actions) * dt,
             "closest": float(np.min(result.person_gaps)) if len(result.person_gaps) else math.inf}

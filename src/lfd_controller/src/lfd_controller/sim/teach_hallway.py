@@ -90,10 +90,12 @@ def scenes(grid: GridMap, name: str, seeds: Sequence[int], people: Optional[int]
 
 
 def drive_learner(scene: HallwayScene, reward, budget: Optional[float] = 0.1,
-                  margin: float = HALLWAY_SAFETY["barrier_margin"]) -> Dict:
+                  margin: float = HALLWAY_SAFETY["barrier_margin"],
+                  max_time: Optional[float] = None) -> Dict:
     """drive_figures of the path-mode controller driving `reward` through `scene` (barrier
-    `margin` m beyond touching, cycle `budget` s or None: unlimited) plus its cycle times, last
-    status and how often it recovered (detours, backing up, giving way)."""
+    `margin` m beyond touching, cycle `budget` s or None: unlimited; for `max_time` s, default
+    the scene's) plus its cycle times, last status and how often it recovered (detours,
+    backing up, giving way)."""
     controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=budget,
                                    safety=dict(HALLWAY_SAFETY, barrier_margin=margin),
                                    grid=scene.grid)
@@ -109,7 +111,7 @@ def drive_learner(scene: HallwayScene, reward, budget: Optional[float] = 0.1,
         waits.step(state, t, controller.give_ways_ > gave_way,
                    controller.status_.startswith(("waiting", "stopped")))
         return command
-    figures = drive_figures(drive(scene, policy))
+    figures = drive_figures(drive(scene, policy, max_time=max_time))
     figures["cycles"] = cycles
     figures["status"] = controller.status_
     figures["recoveries"] = {"detours": controller.detours_, "backing_up": controller.backups_,
