@@ -117,7 +117,7 @@ def plan_give_way(path_follower, position, people, scans, *, clearance: float,
         (xs - position[0]) * towards[0] + (ys - position[1]) * towards[1] <= 0.0)
     stretch = [path_follower.point_at(s) for s in np.arange(
         path_follower.progress - 3.0, path_follower.progress + 4.0, 0.1)]
-    walks = [person + along * way for person, way in _ways_on(people, position, ways)
+    walks = [person + along * way for person, way in _walking_lines(people, position, ways)
              for along in np.arange(0.0, np.hypot(*(person - position)) + reach + 1.0, 0.1)]
     for points, room in ((stretch, aside), (people, clear), (walks, clear)):
         for x, y in points:
@@ -135,7 +135,7 @@ def plan_give_way(path_follower, position, people, scans, *, clearance: float,
     return None
 
 
-def _ways_on(people: np.ndarray, position: np.ndarray, ways=None):
+def _walking_lines(people: np.ndarray, position: np.ndarray, ways=None):
     """(person, unit vector) pairs: each person toward `position`, and along `ways` (P, 2)
     where it is known (not NaN)."""
     pairs = []

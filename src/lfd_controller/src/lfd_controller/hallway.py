@@ -399,10 +399,11 @@ class HallwayController:
         if waiting.any():
             scans = list(self._scans) + [(laser_pose(state, self.laser_offset), angles, ranges)]
             spot = self._spot_aside(state, people, names, waiting, scans)
-            moves = self._giving_way.moves + 1 if spot is not None else MOVES
-            if spot is not None:
-                self._giving_way = GivingWay(spot, self._giving_way.held_at, t)
-            self._giving_way.moves = moves
+            if spot is None:        # nowhere else to go: it waits on where it is
+                self._giving_way.moves = MOVES
+            else:
+                self._giving_way = GivingWay(spot, self._giving_way.held_at, t,
+                                             moves=self._giving_way.moves + 1)
         command = self._giving_way.command(state, t, people)
         self._tried, self.held_since_ = t, None
         if command is None:
