@@ -1,7 +1,7 @@
 """reward_controller's path mode for real (roscore, roslaunch): with a hallway reward it follows
 a nav_msgs/Path, stops (zero speed) for what the scan shows inside its safety margin ahead and
 says so on /diagnostics; held there while the path is re-planned the same way twice a second
-(as move_base does), it reports the path blocked."""
+(as move_base does), it reports the path blocked; the goal sent again retries at once."""
 import math
 
 import numpy as np
@@ -9,7 +9,7 @@ import pytest
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, Twist
-from nav_msgs.msg import Odometry, Path
+from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from sensor_msgs.msg import LaserScan
 
 from robot_common.msg import People
@@ -51,15 +51,29 @@ def scan_msg(nearest_ahead):
     return msg
 
 
+def free_map():
+    """A 10 x 4 m room round the path, walls on its edges (0.1 m cells, frame odom)."""
+    grid = OccupancyGrid()
+    grid.header.frame_id = "odom"
+    grid.info.resolution, grid.info.width, grid.info.height = 0.1, 100, 40
+    grid.info.origin.position.x, grid.info.origin.position.y = -2.0, -2.0
+    grid.info.origin.orientation.w = 1.0
+    cells = np.zeros((40, 100), np.int8)
+    cells[[0, -1], :] = cells[:, [0, -1]] = 100
+    grid.data = cells.ravel().tolist()
+    return grid
+
+
 def test_path_mode_follows_the_path_stops_inside_the_safety_margin_and_reports_blocked(
         rospy_node, roslaunch, tmp_path):
     launch = roslaunch.node("lfd_controller", "reward_controller",
                             params={"reward_file": str(hallway_reward_file(tmp_path)),
                                     "frame": "odom", "blocked_after": 2.0})
-    launch.wait_for_subscribers(["/path", "/scan", "/people", "/odom"], timeout=120)
+    launch.wait_for_subscribers(["/path", "/scan", "/people", "/odom", "/map", "/goal"],
+                                timeout=120)
     publishers = {name: rospy.Publisher(f"/{name}", kind, queue_size=2, latch=True)
                   for name, kind in (("odom", Odometry), ("scan", LaserScan), ("people", People),
-                                     ("path", Path))}
+                                     ("path", Path), ("map", OccupancyGrid), ("goal", PoseStamped))}
     cmd, diagnostics = Latest("/cmd_vel", Twist), Latest("/diagnostics", DiagnosticArray)
     path = Path()
     path.header.frame_id = "odom"
@@ -68,6 +82,7 @@ def test_path_mode_follows_the_path_stops_inside_the_safety_margin_and_reports_b
         pose.pose.position.x, pose.pose.orientation.w = x, 1.0
         path.poses.append(pose)
     publishers["path"].publish(path)
+    publishers["map"].publish(free_map())      # for the goal below
     publishers["people"].publish(People())
     odom = Odometry()
     odom.pose.pose.orientation.w = 1.0
@@ -97,3 +112,13 @@ def test_path_mode_follows_the_path_stops_inside_the_safety_margin_and_reports_b
     replanning["on"] = True                    # held there, re-planned at every poll (<= 0.5 s)
     wait_until(lambda: status(DiagnosticStatus.ERROR, "blocked") and cmd.msg.linear.x == 0.0,
                120, what="the path reported blocked while re-planned the same way")
+    # the way clears and no re-plan comes: blocked it stays, until the goal is sent again (once;
+    # a re-plan would retry only after the robot stood blocked ~blocked_after s more)
+    replanning["on"], ahead["range"], odom.twist.twist.linear.x = False, 4.0, 0.0
+    goal = PoseStamped()
+    goal.header.frame_id, goal.pose.position.x, goal.pose.orientation.w = "odom", 6.0, 1.0
+    publishers["goal"].publish(goal)
+    wait_until(lambda: status(DiagnosticStatus.OK, "following") and cmd.msg.linear.x > 0.05,
+               120, what="the goal sent again driving the blocked path once more")
+    keys = {kv.key: kv.value for kv in diagnostics.msg.status[0].values}
+    assert keys["following"] == "a planned path to (6.0, 0.0)"
