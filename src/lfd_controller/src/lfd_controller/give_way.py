@@ -49,9 +49,7 @@ def people_holding(state, people, velocities, earlier=(), *, names=None,
     names = list(names) if names is not None else [""] * len(people)
     walked = np.zeros(len(people), bool)
     for report in earlier:
-        before = np.asarray(report[0], float).reshape(-1, 2)
-        moving = np.hypot(*np.asarray(report[1], float).reshape(-1, 2).T) >= WALKING
-        tracks = report[2] if len(report) > 2 and report[2] is not None else None
+        before, _, moving, tracks = _read(report)
         walking_names = {n for n, m in zip(tracks, moving) if m and n} if tracks else set()
         for i, name in enumerate(names):
             if name and tracks is not None:
@@ -68,16 +66,24 @@ def ways_on(people, earlier=(), *, names=None) -> np.ndarray:
     ways = np.full((len(np.asarray(people, float).reshape(-1, 2)), 2), np.nan)
     names = list(names) if names is not None else [""] * len(ways)
     for report in earlier:       # oldest first: the latest walking report wins
-        tracks = report[2] if len(report) > 2 and report[2] is not None else None
+        _, velocities, moving, tracks = _read(report)
         if not tracks:
             continue
-        velocities = np.asarray(report[1], float).reshape(-1, 2)
-        speeds = np.hypot(*velocities.T)
-        walking = {n: v / s for n, v, s in zip(tracks, velocities, speeds) if n and s >= WALKING}
+        walking = {n: v / np.hypot(*v) for n, v, m in zip(tracks, velocities, moving) if n and m}
         for i, name in enumerate(names):
             if name in walking:
                 ways[i] = walking[name]
     return ways
+
+
+def _read(report):
+    """One earlier report, (people, velocities) or (people, velocities, names): positions
+    (P, 2), velocities (P, 2), who walked (speed WALKING m/s or more) and the track names (None
+    when the tracker gave none)."""
+    velocities = np.asarray(report[1], float).reshape(-1, 2)
+    tracks = report[2] if len(report) > 2 and report[2] is not None else None
+    return (np.asarray(report[0], float).reshape(-1, 2), velocities,
+            np.hypot(*velocities.T) >= WALKING, tracks)
 
 
 @dataclass

@@ -397,8 +397,8 @@ class HallwayController:
         spot (GivingWay.in_the_way), it moves on to another spot out of their way."""
         waiting = self._giving_way.in_the_way(state, t, people, velocities)
         if waiting.any():
-            scans = list(self._scans) + [(laser_pose(state, self.laser_offset), angles, ranges)]
-            spot = self._spot_aside(state, people, names, waiting, scans)
+            spot = self._spot_aside(state, people, names, waiting,
+                                    self._scans_with(state, angles, ranges))
             if spot is None:        # nowhere else to go: it waits on where it is
                 self._giving_way.moves = MOVES
             else:
@@ -408,8 +408,7 @@ class HallwayController:
         self._tried, self.held_since_ = t, None
         if command is None:
             self._giving_way = None
-            scans = list(self._scans) + [(laser_pose(state, self.laser_offset), angles, ranges)]
-            self._rejoin(state, scans, self._detour_clearance)
+            self._rejoin(state, self._scans_with(state, angles, ranges), self._detour_clearance)
             self._turning = True
             return None
         if self._too_close(angles, ranges, state[3], command) is not None:
@@ -418,6 +417,11 @@ class HallwayController:
         self.status_ = ("giving way: to a spot out of the way" if moving
                         else "giving way: waiting for people to pass")
         return command
+
+    def _scans_with(self, state, angles, ranges) -> List:
+        """The kept scans and the scan of this cycle, oldest first (what detours and spots to
+        give way at are planned on)."""
+        return list(self._scans) + [(laser_pose(state, self.laser_offset), angles, ranges)]
 
     def _turn_toward(self, state, t: float, waypoint) -> Optional[np.ndarray]:
         """On a new path or after a recovery: the command turning in place toward `waypoint`
