@@ -152,11 +152,12 @@ def fit_person_reward(demos: Sequence[Demonstration], seed: int = 0, *, calibrat
 
 
 class RewardNotAcceptedError(LearningError):
-    """The learned reward's controller fails where the person succeeded (see `acceptance`)."""
+    """The acceptance check refused the learned reward: its controller fails where the person
+    succeeded, or no demonstration gives it anything to be held to (see `acceptance`)."""
 
     def __init__(self, acceptance: Acceptance):
-        super().__init__("the learned reward was NOT saved: its controller fails where the person "
-                         "succeeded (" + "; ".join(acceptance.failure_lines()) + "). "
+        super().__init__("the learned reward was NOT saved: the acceptance check refused it ("
+                         + "; ".join(acceptance.failure_lines()) + "). "
                          + acceptance.describe())
         self.acceptance = acceptance
 
