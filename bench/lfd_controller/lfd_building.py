@@ -3,14 +3,16 @@
 family no setting was chosen on, driven on floor maps no setting was chosen on.
 
 Floors: the training floor is the generated building (robot_sim.building, seed 0); the test
-floors are the real Levine Hall floors (../shared/data/maps, 4th and 6th; never used for any
-choice) or, when that folder is absent, a larger generated building (seed 7). Scenes:
+floor is the real Towne-Levine floor (../shared/data/maps; never used for any choice - the
+real Levine 4th and 6th floors and the generated buildings of seeds 7 and 8 were the
+development floors, so their figures are no held-out figures) or, when that folder is absent, a
+larger generated building (seed 7). Scenes:
 robot_sim.hallway.make_scene (start and goal 10-30 m apart along the halls here - the long
 drives cost CPU; 2-8 people of every kind, one piece of clutter).
 
-For each family F (of the six lfd_controller.sim families, each left out of every choice: the
-feature set, the controller settings (hallway.HALLWAY_DRIVING) and the baselines' tuning were
-fixed without F's drives):
+For each family F (of the lfd_controller.sim families; each but tangent, the development
+family, left out of every choice: the feature set, the controller settings (hallway.
+HALLWAY_DRIVING, HALLWAY_SAFETY) and the baselines' tuning were fixed without F's drives):
   * a new person of F gives demonstrations on training-floor scenes (only successful takes);
     the reward is learned (hallway.fit_hallway_reward), its pace set to the person's
     (calibrate_pace), the barrier margin to the person's room (room_margin) and checked
@@ -36,8 +38,8 @@ to arrive at that person's pace with half as long again for the crowd. The perso
 controller and cloning drive until the pace limit; social force and DWA (shared by the
 families) until twice the scene's limit.
 
-Transfer: `--train levine_4th_good` has the person teach on that real floor instead and tests on
-the other (`--tests` names test maps); settings are still chosen on the generated building.
+Transfer: `--train levine_4th_good` has the person teach on that real floor instead (`--tests`
+names the test maps); settings are still chosen on the generated building.
 
 Resumable (artifacts/bench/lfd_building/<family>.json, or train_<floor>/ for a transfer run);
 --phase table prints the table.
@@ -82,11 +84,12 @@ def floors(train: str = "generated", tests: Optional[Sequence[str]] = None):
     """(choice floor grid, teaching floor grid, [(name, grid)] test floors). Settings are always
     chosen on the generated building; `train` names the floor the person teaches on (the
     generated building or a map in ../shared/data/maps: a transfer run), `tests` the test maps
-    (default: the Levine floors other than `train`)."""
+    (default: Towne-Levine, the floor no setting was chosen on; Levine 6th when the person
+    teaches on Towne-Levine)."""
     chosen = generate_building(0).grid
     taught = chosen if train == "generated" else load_map(MAPS / f"{train}.yaml")
     if MAPS.is_dir():
-        names = tests or [n for n in ("levine_4th_good", "levine_6th") if n != train]
+        names = tests or [n for n in ("towne_levine", "levine_6th") if n != train][:1]
         return chosen, taught, [(name, load_map(MAPS / f"{name}.yaml")) for name in names]
     return chosen, taught, [("generated_seed7", generate_building(7, rooms_per_side=7).grid)]
 

@@ -94,6 +94,50 @@ def test_the_controller_held_up_in_a_cup_of_clutter_drives_round_it_to_the_goal(
     assert controller.detours_ >= 1
 
 
+def first_cycle(scene, pose, *, people=np.zeros((0, 2)), grid=True, **safety):
+    """A standing controller's first cycle at `pose` with the scan of `scene` (its clutter and
+    walls) and tracked `people`; the controller."""
+    reward = progress_reward(speed_effort=-1.0, turn_effort=-1.0)
+    controller = HallwayController(reward, scene.path, Unicycle(0.1), budget=None,
+                                   settings={"max_iter": 2}, grid=scene.grid if grid else None,
+                                   safety=dict(HALLWAY_SAFETY, **safety))
+    people = np.asarray(people, float).reshape(-1, 2)
+    ranges = scene.scan(np.asarray(pose, float), 0.0, ANGLES, 8.0)
+    if len(people):     # the scan sees them too
+        from robot_sim.crowd import disc_ranges
+        ranges = np.minimum(ranges, disc_ranges(pose[0], pose[1], pose[2] + ANGLES, people, 0.25))
+    controller.act(np.array([*pose, 0.0, 0.0]), 0.0, ANGLES, ranges, people,
+                   np.zeros_like(people))
+    return controller
+
+
+def test_something_the_map_lacks_on_the_path_ahead_is_detoured_round_at_once():
+    scene = hall([(4.0, 2.1, 0.3)])         # a cart on the path, 1.7 m ahead of the robot
+    controller = first_cycle(scene, (2.0, 2.1, 0.0))
+    assert controller.detours_ == 1         # at its first cycle: nothing has held it up yet
+    path = controller.follower.path
+    dense = np.vstack([np.linspace(a, b, 20) for a, b in zip(path[:-1], path[1:])])
+    assert np.hypot(*(dense - [4.0, 2.1]).T).min() >= 0.3 + 0.28 - 0.08   # a cell's slack
+    assert np.allclose(path[-1], scene.goal)
+    assert first_cycle(scene, (2.0, 2.1, 0.0), replan_ahead=0.0).detours_ == 0   # off
+    assert first_cycle(scene, (2.0, 2.1, 0.0), grid=False).detours_ == 0   # no map: can't tell
+    assert first_cycle(scene, (0.5, 2.1, 0.0)).detours_ == 0   # 3.2 m ahead: not yet
+
+
+def test_walls_of_the_map_and_tracked_people_on_the_path_ahead_are_no_reason_to_re_plan():
+    door = hall([])
+    door.grid.cells[:19, 40] = OCCUPIED     # a wall across the hall at x = 4 m, a door 0.5 m
+    door.grid.cells[24:, 40] = OCCUPIED     # wide round the path (y 1.9-2.4 m)
+    assert door.grid.is_free(4.05, 2.1) and not door.grid.is_free(4.05, 1.85)
+    tried = -math.inf       # when the controller last looked for a detour round what is ahead
+    assert first_cycle(door, (2.0, 2.1, 0.0))._ahead_tried == tried
+    assert first_cycle(hall([]), (2.0, 2.1, 0.0), people=[(3.5, 2.1)])._ahead_tried == tried
+    # a narrower door frame where the map has none is something the map lacks
+    frame = hall([(4.05, y, 0.05) for y in np.arange(0.2, 1.91, 0.1)]
+                 + [(4.05, y, 0.05) for y in np.arange(2.3, 4.1, 0.1)])
+    assert first_cycle(frame, (2.0, 2.1, 0.0))._ahead_tried == 0.0
+
+
 def test_held_up_again_after_a_detour_it_backs_up_unless_something_is_behind():
     reward = progress_reward(speed_effort=-1.0, turn_effort=-1.0)
     scene = hall([])

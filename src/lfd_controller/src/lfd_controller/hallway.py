@@ -9,7 +9,9 @@ command - or, when moving on would bring the scan inside its safety margin, a ze
 (`status_`). A waypoint far off its heading on a new path, or after a recovery, is first turned
 to in place. A robot held up (without 0.3 m of progress along the path) for `replan_after`
 seconds follows a detour planned on the floor map and the scan (detour.plan_detour) round what
-the path's planner never saw, and held up again first backs up; standing still for
+the path's planner never saw, and held up again first backs up; with a map, it plans that
+detour at once when the scan shows something the map lacks (not a tracked person) on the path
+just ahead; standing still for
 `blocked_after` seconds, or held up for 3 x as long, it reports the path blocked and stays
 stopped. Learning (`fit_hallway_reward`) is CIOC over the same tasks, built from the
 demonstrations' own scans and tracked people at the start of each 4 s window, then an
@@ -36,6 +38,7 @@ from lfd_controller.hallway_features import (
     HallwayTask,
     PathFollower,
     in_sight,
+    near_people,
     scan_points,
 )
 from lfd_controller.laplace import DemoDynamics
@@ -58,7 +61,8 @@ __all__ = ["HALLWAY_DRIVING", "HALLWAY_SAFETY", "room_margin", "TaskBuilder", "H
 # discount 0.97, a barrier 0.1 m beyond touching, a safety stop (zero speed; turning in place
 # allowed) when moving on would bring the scan within 0.05 m of the robot's edge, the path
 # reported blocked after 20 s standing still or 60 s held up (without 0.3 m of progress), a
-# detour after 4 s held up and backing up the next time,
+# detour after 4 s held up and backing up the next time, a detour at once round something the map
+# lacks within the detour's room of the path's next 2.5 m,
 # the local waypoint 4 m ahead on the path or the furthest point up to there in the scan's sight,
 # tracked people hiding nothing (further than a 4 s window
 # or the look-ahead travels: a waypoint passed inside a window turns its progress feature around);
@@ -68,11 +72,16 @@ HALLWAY_DRIVING = {"horizon": 12, "plan_dt": 0.4, "terminal": 0.0, "spread_seeds
                    "detour": 0.9, "unstall": 2.0}
 HALLWAY_SAFETY = {"robot_radius": 0.18, "person_radius": 0.25, "barrier_margin": 0.1,
                   "stop_margin": 0.05, "blocked_after": 20.0, "lookahead": 4.0,
-                  "replan_after": 4.0, "give_way": True}
+                  "replan_after": 4.0, "replan_ahead": 2.5, "give_way": True}
 WINDOW, STRIDE = 40, 20
 # The safety stop looks this far (m) along the command beyond the stopping distance, and lets
 # through moves that bring a point inside its margin no more than this much (m) closer.
 STOP_LOOK, STOP_SLACK = 0.05, 0.01
+# A scan return within MAP_SLACK m of a wall of the floor map is the wall (a robot's pose is that
+# far off the map); one further from every wall and from the tracked people is something the map
+# lacks. The path ahead is checked every SCAN_EVERY s, a detour round it tried at most every
+# AHEAD_EVERY s.
+MAP_SLACK, AHEAD_EVERY = 0.2, 2.0
 # Progress along the path (m) that counts as getting on (the detour and blocked clocks), and the
 # detour's room: the safety stop's reach plus this much (m).
 PROGRESS_STEP, DETOUR_ROOM = 0.3, 0.05
@@ -267,22 +276,28 @@ class HallwayController:
         self._left, self._getting_on, self._tried = math.inf, 0.0, 0.0
         self._recoveries, self._backing_until, self._turning = 0, -math.inf, True
         self._detour_until, self._blocked_at = -math.inf, math.inf
+        self._ahead_tried = -math.inf
 
     @property
     def goal(self) -> np.ndarray:
         return self.follower.path[-1]
 
     def _detour(self, state, t: float, angles, ranges, people, velocities, names=None) -> bool:
-        """Keep the scans and the progress clocks; after `replan_after` s without PROGRESS_STEP m
-        of progress (and as often again while none comes) follow a detour (detour.plan_detour,
-        on the floor map and the scans) or, every other time, back up first. True when the
-        path changed."""
+        """Keep the scans and the progress clocks; with each kept scan that shows something the
+        map lacks on the path ahead (`_unmapped_ahead`), and after `replan_after` s without
+        PROGRESS_STEP m of progress (and as often again while none comes), follow a detour
+        (detour.plan_detour, on the floor map and the scans) or, every other time held up, back
+        up first. True when the path changed."""
         laser = laser_pose(state, self.laser_offset)
         if t - self._scanned >= SCAN_EVERY:
             self._scans.append((laser, np.asarray(angles, float), np.asarray(ranges, float)))
             self._seen_people.append((np.asarray(people, float), np.asarray(velocities, float),
                                       None if names is None else list(names)))
             self._scanned = t
+            if self._unmapped_ahead(laser, angles, ranges, people):
+                self._ahead_tried = t
+                if self._rejoin(state, list(self._scans), self._detour_clearance):
+                    return True
         left = self.follower.length - self.follower.progress
         if left < self._left - PROGRESS_STEP:
             self._left, self._getting_on, self._tried = left, t, t
@@ -305,6 +320,40 @@ class HallwayController:
             self._turning = True
             return False
         return self._rejoin(state, scans, clearance)
+
+    def _unmapped_ahead(self, laser, angles, ranges, people) -> bool:
+        """With a floor map, and AHEAD_EVERY s after the last try: whether a return of this scan
+        that is no wall of the map (MAP_SLACK) and no tracked person lies within the detour's room
+        of the path's next `replan_ahead` m (move_base would re-plan round it: its costmap has
+        it)."""
+        ahead = self.safety.get("replan_ahead", 0.0)
+        if self.grid is None or ahead <= 0 or self._now - self._ahead_tried < AHEAD_EVERY:
+            return False
+        ranges, angles = np.asarray(ranges, float), np.asarray(angles, float)
+        ok = np.isfinite(ranges) & (ranges > 0.01) & (ranges < ahead + 0.5)     # off the path
+        bearings = laser[2] + angles[ok]
+        points = np.column_stack([laser[0] + ranges[ok] * np.cos(bearings),
+                                  laser[1] + ranges[ok] * np.sin(bearings)])
+        # what already stands within the detour's room of the robot is the held-up recoveries'
+        # (a detour from where it stands starts there whatever it plans)
+        points = points[np.hypot(points[:, 0] - self._position[0], points[:, 1] - self._position[1])
+                        >= self._detour_clearance]
+        people = np.asarray(people, float).reshape(-1, 2)
+        if len(people) and len(points):
+            points = points[~near_people(points, people, 0.35)]
+        cell = self.grid.resolution
+        offsets = np.arange(-MAP_SLACK, MAP_SLACK + 1e-9, cell)
+        for dx in offsets:
+            if not len(points):
+                return False
+            for dy in offsets:
+                points = points[self.grid.is_free(points[:, 0] + dx, points[:, 1] + dy)]
+                if not len(points):
+                    return False
+        path = np.array([self.follower.point_at(self.follower.progress + s)
+                         for s in np.arange(0.0, ahead + 1e-9, 0.1)])
+        gaps = np.hypot(path[:, None, 0] - points[None, :, 0], path[:, None, 1] - points[None, :, 1])
+        return bool(gaps.min() < self._detour_clearance)
 
     def _spot_aside(self, state, people, names, waiting, scans) -> Optional[np.ndarray]:
         """The way to a spot out of the way of the `waiting` (mask) of `people`

@@ -115,6 +115,10 @@ class RewardControllerParams(NodeConfig):
                                      "a detour planned on ~map and the scan round what blocks "
                                      "the path, the next time back up 0.3 m first (if nothing "
                                      "is behind), and so on; 0: never")
+    replan_ahead: float = param(2.5, "path mode: with ~map, follow a detour at once when the "
+                                     "scan shows something the map lacks (not a tracked person) "
+                                     "within the detour's room of the path's next this many "
+                                     "metres; 0: only when held up")
     give_way: bool = param(True, "path mode: held up by someone standing close in front (who "
                                  "may be waiting for the robot), first move aside out of their "
                                  "way and wait for them to pass")
@@ -151,6 +155,9 @@ class RewardControllerParams(NodeConfig):
                 raise ConfigError(f"~{name} must be positive, got {getattr(self, name)!r}")
         if self.replan_after < 0:
             raise ConfigError(f"~replan_after must be >= 0 (0: never), got {self.replan_after!r}")
+        if self.replan_ahead < 0:
+            raise ConfigError(f"~replan_ahead must be >= 0 (0: only when held up), got "
+                              f"{self.replan_ahead!r}")
         if self.safety_margin < 0 or self.laser_offset < 0:
             raise ConfigError(f"~safety_margin and ~laser_offset must be >= 0, got "
                               f"{self.safety_margin!r}, {self.laser_offset!r}")
@@ -163,7 +170,8 @@ class RewardControllerParams(NodeConfig):
         return {"robot_radius": self.robot_radius, "person_radius": self.person_radius,
                 "barrier_margin": self.barrier_margin, "stop_margin": self.safety_margin,
                 "blocked_after": self.blocked_after, "lookahead": self.lookahead,
-                "replan_after": self.replan_after, "give_way": self.give_way}
+                "replan_after": self.replan_after, "replan_ahead": self.replan_ahead,
+                "give_way": self.give_way}
 
     def limits(self) -> UnicycleLimits:
         """The robot's limits (ModelError when one is not positive)."""

@@ -38,6 +38,8 @@ class HallwayControllerNode:
       1/rate), ~max_iter, the limits, ~robot_radius, ~goal_tolerance, ~frame, ~enabled and the
       path mode's ~lookahead (4.0 m), ~safety_margin (0.05 m), ~blocked_after (20 s),
       ~replan_after (4 s: held up this long, a detour planned on the map and the scan),
+      ~replan_ahead (2.5 m: with a map, that detour at once round something the map lacks on
+      this much of the path ahead),
       ~give_way (true: held up by someone who stopped in front, first move out of their way),
       ~laser_offset (0.1 m), ~person_radius (0.25 m), ~barrier_margin (0.1 m).
     Topics in: odom (nav_msgs/Odometry, pose in the path's frame), path (nav_msgs/Path: the
