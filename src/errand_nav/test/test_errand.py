@@ -77,10 +77,11 @@ def test_a_forecast_look_comes_every_period_while_driving():
 
 
 def test_remaining_path_starts_at_the_robot_and_keeps_what_is_ahead():
-    ahead = remaining_path(PATH, (9.8, 0.2))
-    assert ahead[0].tolist() == [9.8, 0.2]
-    assert ahead[-1].tolist() == [10.0, 5.0]
-    assert len(ahead) == 2
+    ahead = remaining_path(PATH, (10.2, 0.6))             # round the corner
+    assert ahead.tolist() == [[10.2, 0.6], [10.0, 5.0]]
+    ahead = remaining_path(PATH, (9.4, 0.1))              # before the corner: it is kept
+    assert ahead.tolist() == [[9.4, 0.1], [10.0, 0.0], [10.0, 5.0]]
+    assert remaining_path(PATH, (10.1, 5.2)).tolist() == [[10.1, 5.2], [10.0, 5.0]]   # at the end
 
 
 def test_obstacles_are_marked_round_the_points_but_not_on_the_robot():

@@ -132,14 +132,15 @@ def _standing_still(sightings: List[np.ndarray]) -> np.ndarray:
 
 
 def remaining_path(path: np.ndarray, xy: Sequence[float]) -> np.ndarray:
-    """The part of `path` (N, 2) still ahead of the robot at `xy`, starting at `xy`."""
-    path = np.asarray(path, float)
+    """The part of `path` (N, 2) still ahead of the robot at `xy`, starting at `xy`: the
+    vertices beyond the point of the path nearest the robot (a corner just ahead is kept: the
+    way from the robot straight to the vertex after it would cut the corner)."""
+    path = np.asarray(path, float).reshape(-1, 2)
+    here = np.asarray(xy, float)[None, :2]
     if len(path) < 2:
-        return np.vstack([np.asarray(xy, float)[None], path])
-    gaps = np.hypot(*(path - np.asarray(xy, float)).T)
-    nearest = int(np.argmin(gaps))
-    return np.vstack([np.asarray(xy, float)[None], path[nearest + 1:]]) \
-        if nearest + 1 < len(path) else np.vstack([np.asarray(xy, float)[None], path[-1:]])
+        return np.vstack([here, path])
+    ahead = path[arc_lengths(path) > nearest_arc(path, here[0])[0] + 1e-9]
+    return np.vstack([here, ahead if len(ahead) else path[-1:]])
 
 
 def nearest_clear(search, point: Sequence[float], reach: float) -> Tuple[float, float]:

@@ -22,6 +22,7 @@ import numpy as np
 
 from robot_common.errors import MapError
 from robot_common.maps import FREE, GridMap
+from robot_common.polylines import path_length
 
 __all__ = ["clearance_map", "plan_path", "path_length", "NoPathError", "SearchGrid",
            "CellCosts", "cheapest_cells"]
@@ -231,9 +232,3 @@ def _octile_to(goal: Tuple[int, int], rows: int, cols: int, floor: float) -> np.
     d_col = np.abs(np.arange(-1, cols + 1) - goal[1])[None, :]
     low, high = np.minimum(d_row, d_col), np.maximum(d_row, d_col)
     return (floor * (high + (math.sqrt(2.0) - 1.0) * low)).ravel()
-
-
-def path_length(points: np.ndarray) -> float:
-    """Length (m) of a polyline (N, 2)."""
-    points = np.asarray(points, float)
-    return float(np.hypot(*np.diff(points, axis=0).T).sum()) if len(points) > 1 else 0.0

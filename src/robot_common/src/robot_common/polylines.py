@@ -5,7 +5,7 @@ from typing import Tuple
 
 import numpy as np
 
-__all__ = ["arc_lengths", "nearest_arc", "points_along", "point_at", "distance_to", "same_way"]
+__all__ = ["arc_lengths", "path_length", "nearest_arc", "points_along", "point_at", "distance_to", "same_way"]
 
 
 def arc_lengths(path) -> np.ndarray:
@@ -13,6 +13,11 @@ def arc_lengths(path) -> np.ndarray:
     path = np.asarray(path, float).reshape(-1, 2)
     steps = np.hypot(*np.diff(path, axis=0).T) if len(path) > 1 else np.zeros(0)
     return np.concatenate([[0.0], np.cumsum(steps)])
+
+
+def path_length(path) -> float:
+    """Length (m) of a polyline (N, 2); 0 for fewer than two points."""
+    return float(arc_lengths(path)[-1])
 
 
 def _segments(path: np.ndarray, points: np.ndarray):
