@@ -13,6 +13,7 @@ import math
 from typing import NamedTuple, Optional, Sequence
 
 import numpy as np
+from scipy.ndimage import label
 
 from robot_common.gridplan import CellCosts, NoPathError, cheapest_cells, clearance_map, path_length
 from robot_common.maps import FREE, OCCUPIED, GridMap
@@ -85,8 +86,11 @@ def plan_detour(path_follower, position, scans: Sequence, *, clearance: float,
     position = np.asarray(position, float)[:2]
     grid = scan_window(scans, centre=position, half_width=half_width, cell=cell, grid=grid)
     cost = _step_costs(grid, position, clearance, comfort, wall_cost)
+    joined = _joined(grid, cost, position)
     for along in np.arange(min(reach, path_follower.length - path_follower.progress), 0.99, -0.25):
         target = path_follower.point_at(path_follower.progress + along)
+        if not joined(target):
+            continue
         points = _cell_path(grid, cost, position, target)
         if points is not None:
             rest = path_follower.path[path_follower.arc > path_follower.progress + along + 1e-6]
@@ -127,8 +131,10 @@ def plan_give_way(path_follower, position, people, scans, *, clearance: float,
         cost = cost + 2.0 * wall_cost * np.clip((clear - apart) / clear, 0.0, 1.0)
     now = _nearest(position[None], people) if len(people) else math.inf
     order = np.argsort(np.hypot(xs[spots] - position[0], ys[spots] - position[1]))
+    joined = _joined(grid, cost, position)
     for index in order[:tries]:
-        points = _cell_path(grid, cost, position, (xs[spots][index], ys[spots][index]))
+        spot = (xs[spots][index], ys[spots][index])
+        points = _cell_path(grid, cost, position, spot) if joined(spot) else None
         if points is not None and path_length(points) <= reach + 1.0 and not (
                 len(people) and _nearest(points, people) < now - grid.resolution):
             return points
@@ -166,6 +172,21 @@ def _step_costs(grid: GridMap, position, clearance: float, comfort: float,
     around = np.hypot(xs - position[0], ys - position[1]) <= clearance
     cost[around & (grid.cells == FREE)] = 1.0 + wall_cost
     return cost
+
+
+def _joined(grid: GridMap, cost: np.ndarray, start_point):
+    """point -> whether a path on `cost` can join it to `start_point`: both in the same
+    8-connected piece of the passable cells (what _cell_path's search moves through). One labelling
+    instead of a search that fails for every target out of reach: each such search visits every
+    cell the robot can reach, and a detour tries up to 17 targets."""
+    pieces, _ = label(np.isfinite(cost), structure=np.ones((3, 3), int))
+    start = grid.world_to_cell(*start_point)
+    mine = pieces[start] if grid.inside(*start) else 0
+
+    def joined(point) -> bool:
+        cell = grid.world_to_cell(*point)
+        return bool(mine) and bool(grid.inside(*cell)) and pieces[cell] == mine
+    return joined
 
 
 def _cell_path(grid: GridMap, cost: np.ndarray, start_point, end_point) -> Optional[np.ndarray]:
