@@ -45,7 +45,7 @@ from lfd_controller.laplace import DemoDynamics
 from lfd_controller.planner import RecedingHorizonController
 from lfd_controller.rewards import RewardDerivatives
 from robot_common.maps import GridMap
-from robot_common.polylines import nearest_arc, same_way
+from robot_common.polylines import nearest_arc, points_along, same_way
 from robot_common.tasks import ObstacleMotion, Scenario
 
 __all__ = ["HALLWAY_DRIVING", "HALLWAY_SAFETY", "room_margin", "TaskBuilder", "HallwayBarrier",
@@ -341,17 +341,16 @@ class HallwayController:
         people = np.asarray(people, float).reshape(-1, 2)
         if len(people) and len(points):
             points = points[~near_people(points, people, 0.35)]
-        cell = self.grid.resolution
-        offsets = np.arange(-MAP_SLACK, MAP_SLACK + 1e-9, cell)
+        offsets = np.arange(-MAP_SLACK, MAP_SLACK + 1e-9, self.grid.resolution)
+        lacked = np.ones(len(points), bool)     # free cells all round, every cell within MAP_SLACK
         for dx in offsets:
-            if not len(points):
-                return False
             for dy in offsets:
-                points = points[self.grid.is_free(points[:, 0] + dx, points[:, 1] + dy)]
-                if not len(points):
-                    return False
-        path = np.array([self.follower.point_at(self.follower.progress + s)
-                         for s in np.arange(0.0, ahead + 1e-9, 0.1)])
+                lacked &= self.grid.is_free(points[:, 0] + dx, points[:, 1] + dy)
+        if not lacked.any():
+            return False
+        points = points[lacked]
+        path = points_along(self.follower.path, self.follower.progress
+                            + np.arange(0.0, ahead + 1e-9, 0.1), self.follower.arc)
         gaps = np.hypot(path[:, None, 0] - points[None, :, 0], path[:, None, 1] - points[None, :, 1])
         return bool(gaps.min() < self._detour_clearance)
 
