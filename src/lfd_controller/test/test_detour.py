@@ -439,3 +439,39 @@ def test_a_walker_waiting_for_it_at_a_corridor_mouth_is_given_way_to():
     assert reached and give_ways >= 1
     assert min(gaps) >= gaps[0] - 0.1                  # away from them, never toward them
     assert not meet_at_mouth(False)[0]                  # the waiting game, without giving way
+
+
+def test_where_the_full_room_is_not_there_it_gives_way_with_less():
+    # before the mouth the hall is 2.4 m wide: no spot there 0.8 m off the path and 1 m off the
+    # walker's way keeps 0.28 m from the walls (give_way.GIVE_WAY_ROOMS' first room)
+    scene = mouth(wide=2.4)
+    middle, held = scene.path[0, 1], np.array([3.6, scene.path[0, 1], 0.0, 0.0, 0.0])
+    follower = PathFollower(scene.path, lookahead=4.0)
+    follower.update(held[:2])
+    assert plan_give_way(follower, held[:2], [[4.3, middle]], [seen_from(scene, held[:3])],
+                         clearance=0.28, grid=scene.grid) is None
+    controller = HallwayController(progress_reward(), scene.path, Unicycle(0.1), budget=None,
+                                   grid=scene.grid)
+    for step in range(200):             # held up by someone who walks up and stops
+        t = 0.1 * step
+        person = np.array([max(6.0 - 0.8 * t, 4.3), middle])
+        velocity = np.array([-0.8, 0.0]) if person[0] > 4.3 else np.zeros(2)
+        controller.act(held, t, ANGLES, scene.scan(held, t, ANGLES, 8.0), [person], [velocity],
+                       ["p"])
+        if controller.give_ways_:
+            break
+    assert controller.give_ways_ == 1
+    spot = controller._giving_way.path[-1]
+    assert spot[0] <= held[0] + 1e-9                                 # away from them
+    assert abs(spot[1] - middle) >= 0.75 - 0.05                      # off their way, a cell's slack
+
+
+def test_who_held_it_up_and_still_stands_there_holds_it_up_after_their_walk_is_forgotten():
+    robot = np.array([0.0, 0.0, 0.0, 0.0, 0.0])
+    standing, still = np.array([[0.8, 0.05], [0.8, -0.6]]), np.zeros((2, 2))
+    assert people_holding(robot, standing, still, []).tolist() == [False, False]
+    held = people_holding(robot, standing, still, [], held_by=[[0.85, 0.0]])
+    assert held.tolist() == [True, False]               # the other stands elsewhere
+    walking = np.array([[0.5, 0.0], [0.0, 0.0]])
+    assert people_holding(robot, standing, walking, [], held_by=[[0.85, 0.0]]).tolist() == \
+        [False, False]                                   # walking on: waits for nobody

@@ -16,7 +16,7 @@ from typing import Optional
 
 import numpy as np
 
-__all__ = ["people_holding", "ways_on", "GivingWay"]
+__all__ = ["people_holding", "ways_on", "GivingWay", "GIVE_WAY_ROOMS"]
 
 # A person standing (slower than STILL m/s) within HOLD_REACH m of the robot, in front of it,
 # who was walking (at WALKING m/s or more) in the last seconds the caller keeps, holds it up:
@@ -29,19 +29,27 @@ __all__ = ["people_holding", "ways_on", "GivingWay"]
 # Someone standing within CLEAR m of the robot MOVE_ON s after it got to its spot (which was
 # CLEAR m from everybody) came up to it there and waits: it is still in their way, and moves
 # on to another spot, at most MOVES times in one act of giving way.
-HOLD_REACH, STILL, WALKING, ARRIVED = 1.2, 0.2, 0.4, 1.0
+# Who held the robot up and still stands where they stood (within HELD_AT m) holds it up
+# however long ago they walked: a wait outlasts the walking the caller remembers.
+HOLD_REACH, STILL, WALKING, ARRIVED, HELD_AT = 1.2, 0.2, 0.4, 1.0, 0.3
 SPEED, TURN, DRIVE = 0.2, math.radians(60.0), 10.0
 WAIT, CLEAR = 6.0, 1.0
 MOVE_ON, MOVES = 2.0, 2
+# The room a spot to give way at keeps, (m off the path's stretch round the robot, m off the
+# waiting people and their ways on), tried in turn: where a door or a hall leaves no spot with
+# the first, the second still lets them by (a person passes a standing robot at about 0.7 m,
+# centre to centre) from closer to the path.
+GIVE_WAY_ROOMS = ((0.8, CLEAR), (0.4, 0.75))
 
 
 def people_holding(state, people, velocities, earlier=(), *, names=None,
-                   reach: float = HOLD_REACH) -> np.ndarray:
+                   reach: float = HOLD_REACH, held_by=()) -> np.ndarray:
     """Which of `people` (P, 2) stand within `reach` m in front of the robot at `state` (x, y,
     yaw, ...) and had walked up, by some earlier report in `earlier` ((people, velocities) or
     (people, velocities, names)): with a track name (`names`, people_msgs/Person.name; "" for
     an untracked detection) the same track was walking; without one, someone was walking within
-    ARRIVED m of where they stand."""
+    ARRIVED m of where they stand. Standing within HELD_AT m of one of `held_by` ((H, 2): where
+    people stood who held the robot up before) counts as having walked up."""
     people = np.asarray(people, float).reshape(-1, 2)
     speeds = np.hypot(*np.asarray(velocities, float).reshape(-1, 2).T)
     offset = people - np.asarray(state[:2], float)
@@ -56,6 +64,10 @@ def people_holding(state, people, velocities, earlier=(), *, names=None,
                 walked[i] |= name in walking_names
             else:
                 walked[i] |= bool(np.any(np.hypot(*(before[moving] - people[i]).T) <= ARRIVED))
+    held_by = np.asarray(held_by, float).reshape(-1, 2)
+    if len(held_by) and len(people):
+        walked |= np.hypot(*(people[:, None, :] - held_by[None, :, :]).transpose(2, 0, 1)
+                           ).min(axis=1) <= HELD_AT
     return (np.hypot(*offset.T) <= reach) & ahead & (speeds < STILL) & walked
 
 

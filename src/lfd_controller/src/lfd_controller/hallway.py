@@ -31,9 +31,10 @@ from lfd_controller.cioc import LinearCIOC
 from lfd_controller.demos import Demonstration
 from lfd_controller.detour import plan_detour, plan_give_way
 from lfd_controller.errors import LfdError
-from lfd_controller.give_way import MOVES, GivingWay, people_holding, ways_on
+from lfd_controller.give_way import GIVE_WAY_ROOMS, MOVES, GivingWay, people_holding, ways_on
 from lfd_controller.hallway_features import (
     HALLWAY_SIGNS,
+    PERSON_RETURNS,
     HallwayFeatures,
     HallwayTask,
     PathFollower,
@@ -277,6 +278,7 @@ class HallwayController:
         self._recoveries, self._backing_until, self._turning = 0, -math.inf, True
         self._detour_until, self._blocked_at = -math.inf, math.inf
         self._ahead_tried = -math.inf
+        self._held_by = np.empty((0, 2))     # where people stood who held it up, since it got on
 
     @property
     def goal(self) -> np.ndarray:
@@ -301,14 +303,17 @@ class HallwayController:
         left = self.follower.length - self.follower.progress
         if left < self._left - PROGRESS_STEP:
             self._left, self._getting_on, self._tried = left, t, t
-            self._recoveries = 0
+            self._recoveries, self._held_by = 0, np.empty((0, 2))
         wait = self.safety.get("replan_after", 0.0)
         if wait <= 0 or t - self._tried < wait:
             return False
         self._tried, self._recoveries = t, self._recoveries + 1
         scans = list(self._scans)[:-1] + [(laser, angles, ranges)]
         clearance = self._detour_clearance
-        holding = people_holding(state, people, velocities, self._seen_people, names=names)
+        holding = people_holding(state, people, velocities, self._seen_people, names=names,
+                                 held_by=self._held_by)
+        if holding.any():
+            self._held_by = np.vstack([self._held_by, np.asarray(people, float)[holding]])[-8:]
         if self.safety.get("give_way", True) and holding.any():    # someone waits for it
             spot = self._spot_aside(state, people, names, holding, scans)
             if spot is not None:
@@ -340,7 +345,7 @@ class HallwayController:
                         >= self._detour_clearance]
         people = np.asarray(people, float).reshape(-1, 2)
         if len(people) and len(points):
-            points = points[~near_people(points, people, 0.35)]
+            points = points[~near_people(points, people, PERSON_RETURNS)]
         offsets = np.arange(-MAP_SLACK, MAP_SLACK + 1e-9, self.grid.resolution)
         lacked = np.ones(len(points), bool)     # free cells all round, every cell within MAP_SLACK
         for dx in offsets:
@@ -356,12 +361,17 @@ class HallwayController:
 
     def _spot_aside(self, state, people, names, waiting, scans) -> Optional[np.ndarray]:
         """The way to a spot out of the way of the `waiting` (mask) of `people`
-        (detour.plan_give_way, with the ways they walked by give_way.ways_on), or None."""
+        (detour.plan_give_way, with the ways they walked by give_way.ways_on, keeping the first
+        room of give_way.GIVE_WAY_ROOMS that has a spot), or None."""
         who = np.asarray(people, float).reshape(-1, 2)[waiting]
         ways = ways_on(who, self._seen_people,
                        names=None if names is None else np.asarray(names)[waiting])
-        return plan_give_way(self.follower, state[:2], who, scans, ways=ways,
-                             clearance=self._detour_clearance, grid=self.grid)
+        for aside, clear in GIVE_WAY_ROOMS:
+            spot = plan_give_way(self.follower, state[:2], who, scans, ways=ways, aside=aside,
+                                 clear=clear, clearance=self._detour_clearance, grid=self.grid)
+            if spot is not None:
+                return spot
+        return None
 
     @property
     def _detour_clearance(self) -> float:

@@ -31,7 +31,7 @@ from lfd_controller.jets import Jet
 from robot_common.polylines import arc_lengths, nearest_arc, point_at
 
 __all__ = ["HALLWAY_STATE_FEATURES", "HALLWAY_SIGNS", "HallwayTask", "HallwayFeatures",
-           "PathFollower", "in_sight", "scan_points"]
+           "PathFollower", "PERSON_RETURNS", "in_sight", "near_people", "scan_points"]
 
 HALLWAY_STATE_FEATURES = ("waypoint_heading", "path_progress", "wall_proximity",
                           "wall_proximity_0.5", "people_proximity", "people_room",
@@ -105,6 +105,11 @@ class HallwayTask:
         return things[first], motion[first]
 
 
+# A scan return within PERSON_RETURNS m of a tracked person's centre is taken for that person
+# (a person's radius, about 0.25 m, with slack for the tracker's error).
+PERSON_RETURNS = 0.35
+
+
 def near_people(points, people, radius: float) -> np.ndarray:
     """Which of `points` (N, 2) lie within `radius` m of one of `people` (P >= 1, 2): the scan
     returns that are a tracked person, not a wall."""
@@ -114,7 +119,7 @@ def near_people(points, people, radius: float) -> np.ndarray:
 
 
 def in_sight(pose, angles, ranges, *, margin: float = 0.3, people: Optional[np.ndarray] = None,
-             person_radius: float = 0.35) -> Callable[[np.ndarray], bool]:
+             person_radius: float = PERSON_RETURNS) -> Callable[[np.ndarray], bool]:
     """point -> True when the scan's nearest beam toward it reaches `margin` m past it. A beam
     that ends on a tracked person (within `person_radius` of one, as in `scan_points`) counts as
     open: a person hides the path behind them but is no wall, and a waypoint pulled in front of
@@ -140,7 +145,8 @@ def in_sight(pose, angles, ranges, *, margin: float = 0.3, people: Optional[np.n
 
 
 def scan_points(pose, angles, ranges, *, sectors: int = 16, reach: float = 3.0,
-                people: Optional[np.ndarray] = None, person_radius: float = 0.35) -> np.ndarray:
+                people: Optional[np.ndarray] = None,
+                person_radius: float = PERSON_RETURNS) -> np.ndarray:
     """The nearest scan point of each of `sectors` equal sectors (within `reach` m), in the frame
     of `pose` (x, y, yaw of the laser); points within `person_radius` of a tracked person are
     left to the people features."""
