@@ -11,7 +11,6 @@ from errand_nav.errand import (
     at_hour_of_week,
     nearest_clear,
     remaining_path,
-    unmapped,
     with_obstacles,
 )
 from errand_nav.places import choose_place
@@ -127,12 +126,6 @@ def test_the_servers_own_confidence_floor_applies_only_when_set():
     assert choose_place("p", **answer(confidence=math.nan), min_confidence=0.8).sure
 
 
-def test_only_scan_points_the_map_does_not_explain_count_as_obstacles():
-    cells = np.full((40, 40), FREE, dtype=np.int8)
-    cells[:, 30:] = OCCUPIED                                   # a wall from x = 3.0 m
-    grid = GridMap(cells, 0.1)
-    points = np.array([[2.99, 1.0], [2.0, 1.0], [2.9, 2.0]])   # on the wall, in the hall, near it
-    assert unmapped(grid, points, 0.15).tolist() == [[2.0, 1.0]]
 
 
 def test_an_end_where_the_robot_does_not_fit_moves_to_the_nearest_clear_spot():

@@ -6,6 +6,7 @@ import pytest
 from PIL import Image
 
 from robot_common import FREE, OCCUPIED, UNKNOWN, GridMap, MapError, load_map, raycast, save_map
+from robot_common.maps import unmapped
 
 
 def write_map(tmp_path, pixels, **meta):
@@ -111,3 +112,20 @@ def test_a_point_falls_in_the_beam_that_points_at_it():
     # (beam 0), (1, -1) behind it (outside the field of view)
     beams = beam_indices((1.0, 1.0, math.pi / 2), angles, [1.0, 3.0, 1.0], [3.0, 1.0, -1.0])
     assert beams.tolist() == [2, 0, -1]
+
+
+def test_only_scan_points_the_map_does_not_explain_are_unmapped():
+    cells = np.full((40, 40), FREE, dtype=np.int8)
+    cells[:, 30:] = OCCUPIED                                   # a wall from x = 3.0 m
+    grid = GridMap(cells, 0.1)
+    points = np.array([[2.99, 1.0], [2.0, 1.0], [2.9, 2.0]])   # on the wall, in the hall, near it
+    assert unmapped(grid, points, 0.15).tolist() == [False, True, False]
+
+
+def test_a_return_past_a_wall_thinner_than_the_margin_is_that_wall():
+    cells = np.full((80, 80), FREE, dtype=np.int8)
+    cells[:, 40:42] = OCCUPIED                      # a wall 0.1 m thick at x = 2.0 m on 0.05 m cells
+    grid = GridMap(cells, 0.05)
+    points = np.array([[2.14, 1.0], [2.5, 1.0]])    # just past the wall, well past it
+    # 3 x 3 samples 0.15 m apart step over it: only every cell within the margin sees it
+    assert unmapped(grid, points, 0.15).tolist() == [False, True]

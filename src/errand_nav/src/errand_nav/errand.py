@@ -14,7 +14,7 @@ import numpy as np
 from robot_common.maps import FREE, OCCUPIED, GridMap
 from robot_common.polylines import arc_lengths, nearest_arc
 
-__all__ = ["Errand", "ErrandRules", "Verdict", "with_obstacles", "remaining_path", "unmapped",
+__all__ = ["Errand", "ErrandRules", "Verdict", "with_obstacles", "remaining_path",
            "nearest_clear", "at_hour_of_week"]
 
 WEEK = 7 * 86400.0
@@ -164,17 +164,6 @@ def nearest_clear(search, point: Sequence[float], reach: float) -> Tuple[float, 
     if not np.isfinite(gap[best]):
         return float(point[0]), float(point[1])
     return float(xs[best]), float(ys[best])
-
-
-def unmapped(grid: GridMap, points: np.ndarray, margin: float) -> np.ndarray:
-    """The points (N, 2) of a scan that the map does not explain: free cells all round them
-    within `margin` m (a beam ending on a mapped wall is not an obstacle to add)."""
-    points = np.asarray(points, float).reshape(-1, 2)
-    keep = np.ones(len(points), bool)
-    for dx in (-margin, 0.0, margin):
-        for dy in (-margin, 0.0, margin):
-            keep &= grid.is_free(points[:, 0] + dx, points[:, 1] + dy)
-    return points[keep]
 
 
 def with_obstacles(grid: GridMap, points: np.ndarray, radius: float,

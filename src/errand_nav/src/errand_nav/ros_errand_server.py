@@ -15,20 +15,22 @@ from nav_msgs.srv import GetPlan, GetPlanResponse
 from sensor_msgs.msg import LaserScan
 from std_srvs.srv import SetBool
 
-from errand_nav.errand import Errand, at_hour_of_week, nearest_clear, remaining_path, unmapped, with_obstacles
+from errand_nav.errand import Errand, at_hour_of_week, nearest_clear, remaining_path, with_obstacles
 from errand_nav.forecast import DensityForecast
 from errand_nav.params import ErrandServerParams
 from errand_nav.planning import CrowdPlanner, PlannedPath
 from errand_nav.ros_forecast import ask_forecast
 from errand_nav.ros_places import PlaceGoals
 from robot_common.gridplan import NoPathError
-from robot_common.maps import load_map, yaw_to_quaternion
+from robot_common.maps import load_map, unmapped, yaw_to_quaternion
 from robot_common.ros_maps import grid_to_msg, msg_to_grid
 from robot_common.ros_node import path_msg, pose_2d, read_config
 
 # Held up this long (s) without progress, the laser points the map lacks are kept: what the
 # robot saw while held counts as in the way when the path is blocked.
 HELD = 1.0
+# A laser point within MAP_SLACK m of a wall of the map is that wall (robot_common.maps.unmapped).
+MAP_SLACK = 0.15
 
 __all__ = ["ErrandServer", "start"]
 
@@ -166,6 +168,11 @@ class ErrandServer:
         points = _moved(laser, np.column_stack([ranges[ok] * np.cos(angles[ok]),
                                                 ranges[ok] * np.sin(angles[ok])]))
         return points[np.hypot(points[:, 0] - near[0], points[:, 1] - near[1]) <= reach]
+
+    def unmapped_points(self, grid, pose) -> np.ndarray:
+        """The latest scan's points within obstacle_range of `pose` that `grid` lacks."""
+        points = self.scan_points(pose[:2], self.config.obstacle_range)
+        return points[unmapped(grid, points, MAP_SLACK)]
 
     # -- planning ----------------------------------------------------------------------------
     def forecast(self, planner: CrowdPlanner, start, goal, departure: float) -> DensityForecast:
@@ -307,8 +314,7 @@ class ErrandServer:
         with self.lock:
             grid = self.planner.grid
         if verdict.action == "go" and now - errand.last_progress >= HELD:
-            errand.sighted(unmapped(grid, self.scan_points(pose[:2], self.config.obstacle_range),
-                                    0.15))
+            errand.sighted(self.unmapped_points(grid, pose))
         if verdict.action == "arrived":
             return "succeeded", f"reached the goal ({verdict.reason})"
         if verdict.action == "blocked":
@@ -317,8 +323,7 @@ class ErrandServer:
                 return "aborted", (f"blocked: {verdict.reason}; gave up after "
                                    f"{self.rules.max_replans} new paths")
             before = len(errand.obstacles)
-            seen = errand.saw_blocking(
-                unmapped(grid, self.scan_points(pose[:2], self.config.obstacle_range), 0.15))
+            seen = errand.saw_blocking(self.unmapped_points(grid, pose))
             try:
                 planned = self.plan(pose[:2], errand.goal, now + self.crowd_offset,
                                     obstacles=seen)

@@ -45,7 +45,7 @@ from lfd_controller.hallway_features import (
 from lfd_controller.laplace import DemoDynamics
 from lfd_controller.planner import RecedingHorizonController
 from lfd_controller.rewards import RewardDerivatives
-from robot_common.maps import GridMap
+from robot_common.maps import GridMap, unmapped
 from robot_common.polylines import nearest_arc, points_along, same_way
 from robot_common.tasks import ObstacleMotion, Scenario
 
@@ -346,11 +346,7 @@ class HallwayController:
         people = np.asarray(people, float).reshape(-1, 2)
         if len(people) and len(points):
             points = points[~near_people(points, people, PERSON_RETURNS)]
-        offsets = np.arange(-MAP_SLACK, MAP_SLACK + 1e-9, self.grid.resolution)
-        lacked = np.ones(len(points), bool)     # free cells all round, every cell within MAP_SLACK
-        for dx in offsets:
-            for dy in offsets:
-                lacked &= self.grid.is_free(points[:, 0] + dx, points[:, 1] + dy)
+        lacked = unmapped(self.grid, points, MAP_SLACK)
         if not lacked.any():
             return False
         points = points[lacked]

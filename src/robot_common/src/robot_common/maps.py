@@ -91,6 +91,21 @@ class GridMap:
         return GridMap(coarse, self.resolution * factor, self.origin, dict(self.meta))
 
 
+def unmapped(grid: GridMap, points, margin: float) -> np.ndarray:
+    """Which of `points` (N, 2) the map does not explain (a mask): free cells all round them,
+    every cell within `margin` m (a square). A scan return on or beside a mapped wall - or past a
+    wall thinner than `margin` - is the wall, not an obstacle the map lacks."""
+    points = np.asarray(points, float).reshape(-1, 2)
+    offsets = np.arange(-margin, margin + 1e-9, grid.resolution)
+    if offsets[-1] < margin - 1e-9:
+        offsets = np.append(offsets, margin)
+    lacked = np.ones(len(points), bool)
+    for dx in offsets:
+        for dy in offsets:
+            lacked &= grid.is_free(points[:, 0] + dx, points[:, 1] + dy)
+    return lacked
+
+
 def load_map(yaml_path: PathLike) -> GridMap:
     """Read a map_server map (`.yaml` naming a PGM/PNG image), as map_server's trinary mode does."""
     yaml_path = Path(yaml_path)
