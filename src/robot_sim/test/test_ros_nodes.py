@@ -185,3 +185,66 @@ def test_building_sim_in_a_namespace_keeps_its_topics_and_frames_there_on_the_lo
         assert not buffer.can_transform("map", "laser", rospy_node.Time(0))
     finally:
         listener.unregister()
+
+
+def test_building_sim_with_publish_clock_publishes_simulated_time_and_stamps_with_it(
+        roslaunch, rospy_node, tmp_path):
+    import threading
+
+    from nav_msgs.msg import Odometry
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import LaserScan
+    from tf2_msgs.msg import TFMessage
+
+    from ros_harness import wait_until
+
+    # /use_sim_time is global: a launch file of our own sets it (the harness deletes it after)
+    launch = tmp_path / "sim_time.launch"
+    launch.write_text("""<launch>
+  <param name="/use_sim_time" value="true"/>
+  <node pkg="robot_sim" type="building_sim" name="building_sim" output="screen">
+    <rosparam command="load" file="$(find robot_sim)/config/building_sim.yaml"/>
+    <param name="people" value="0"/>
+    <param name="time_scale" value="2.0"/>
+    <param name="publish_clock" value="true"/>
+  </node>
+</launch>
+""")
+    lock, stamps = threading.Lock(), {"clock": [], "odom": [], "scan": []}
+
+    def keep(key, stamp_of):
+        def store(msg):
+            with lock:
+                stamps[key].append(stamp_of(msg).to_nsec())
+        return store
+
+    subs = [rospy_node.Subscriber("/clock", Clock, keep("clock", lambda m: m.clock),
+                                  queue_size=100),
+            rospy_node.Subscriber("/odom", Odometry, keep("odom", lambda m: m.header.stamp),
+                                  queue_size=100),
+            rospy_node.Subscriber("/scan", LaserScan, keep("scan", lambda m: m.header.stamp),
+                                  queue_size=100)]
+    try:
+        sim = roslaunch(str(launch))
+        sim.wait_for_topics(["/clock", "/odom", "/scan"], timeout=90)
+
+        def enough():       # 2 simulated seconds on the clock, with the scans of that time
+            with lock:
+                return (stamps["clock"] and stamps["clock"][-1] - stamps["clock"][0] >= 2e9
+                        and len(stamps["scan"]) >= 5)
+        wait_until(enough, 90, what="2 simulated seconds of /clock and 5 scans")
+        with lock:
+            clock, odom, scan = (list(stamps[key]) for key in ("clock", "odom", "scan"))
+        static = rospy_node.wait_for_message("/tf_static", TFMessage, timeout=30)
+    finally:
+        for sub in subs:
+            sub.unregister()
+    step, scan_period = 50_000_000, 100_000_000        # ~dt 0.05 s, ~scan_rate 10 Hz (in ns)
+    # the clock advances step by step in simulated time from 0 (not wall time)
+    assert all(b > a for a, b in zip(clock, clock[1:]))
+    assert all(t % step == 0 for t in clock) and clock[-1] < 3600e9
+    # the messages are stamped with the simulated time of their step
+    seen = [t for t in odom if clock[0] <= t <= clock[-1]]
+    assert len(seen) >= 10 and all(t % step == 0 for t in odom)
+    assert all(t % scan_period == 0 for t in scan) and set(scan) & set(clock)
+    assert all(t.header.stamp.to_nsec() == 0 for t in static.transforms)

@@ -126,6 +126,10 @@ class BuildingSimParams(NodeConfig):
     time_scale: float = param(1.0, "simulated seconds per wall-clock second")
     command_timeout: float = param(0.5, "simulated seconds after which a silent cmd_vel means stop",
                                    minimum=0.0)
+    publish_clock: bool = param(False, "publish /clock (rosgraph_msgs/Clock) each step with the "
+                                       "simulated time (steps x dt from 0, as Gazebo and Stage "
+                                       "do), stamp every message and tf with it and step on the "
+                                       "wall clock: for nodes run with /use_sim_time true")
     scan_rate: float = param(10.0, "scans (and people reports) per simulated second")
     scan_beams: int = param(360, "laser beams per scan (270 degrees)", minimum=2)
     scan_range: float = param(10.0, "laser range (m)")

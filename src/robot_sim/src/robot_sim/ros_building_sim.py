@@ -8,6 +8,7 @@ import rospy
 import tf2_ros
 from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan
 from std_msgs.msg import String
 from std_srvs.srv import Trigger, TriggerResponse
@@ -28,6 +29,7 @@ from robot_sim.ros_sensors import (
     odometry_msg,
     people_msg,
     run_at,
+    run_at_wall_clock,
     scan_msg,
     static_transforms,
 )
@@ -48,6 +50,8 @@ class BuildingSim:
       as many people as robot_sim.people's halls hold on average at that hour of the week, at
       most ~max_people (30), ~peak_density 0.15 people/m^2).
       ~dt (0.05 s), ~time_scale (1.0 simulated s per wall s), ~command_timeout (0.5 simulated s).
+      ~publish_clock (false; true: publishes /clock with the simulated time, steps x ~dt from 0,
+      stamps every message and tf with it and steps on the wall clock: for /use_sim_time true).
       ~scan_rate (10 per simulated s), ~scan_beams (360 over 270 degrees), ~scan_range (10 m),
       ~people_range (8 m), ~robot_radius (0.18 m), ~obstacle_radius (0.3 m).
       ~odom_frame ("odom"), ~base_frame ("base_link"), ~map_frame ("map"), ~laser_frame
@@ -55,7 +59,8 @@ class BuildingSim:
     Topics in: cmd_vel (geometry_msgs/Twist), initialpose (geometry_msgs/PoseWithCovarianceStamped,
       map frame: put the robot there, standing; clears a collision), ~obstacles_in
       (geometry_msgs/PointStamped, map or odom frame: a disc of ~obstacle_radius the map lacks).
-    Topics out: each step odom (nav_msgs/Odometry; odom frame = map frame), cmd_vel_applied
+    Topics out: each step /clock (rosgraph_msgs/Clock, with ~publish_clock; before the step's
+      other messages), odom (nav_msgs/Odometry; odom frame = map frame), cmd_vel_applied
       (geometry_msgs/TwistStamped: the command that moved the robot this step, zero after the
       timeout or a collision), /tf odom -> base_link; /tf_static map -> odom (identity),
       base_link -> laser (0.1 m ahead); at ~scan_rate scan (sensor_msgs/LaserScan: walls,
@@ -67,7 +72,8 @@ class BuildingSim:
 
     Construction builds the floor, the people and the robot (MapError: unreadable map file,
     SimError: no room for people or a bad start); `setup()` wires ROS and starts stepping at
-    time_scale / dt steps per wall-clock second.
+    time_scale / dt steps per wall-clock second (without ~publish_clock on ROS time: under
+    /use_sim_time another node's /clock paces it).
     """
 
     def __init__(self, config: BuildingSimParams):
@@ -99,16 +105,21 @@ class BuildingSim:
         self.people = pub("people", People, queue_size=5)
         self.truth = pub("~people_truth", People, queue_size=5)
         self.status = pub("~status", String, queue_size=5, latch=True)
+        self.clock = pub("/clock", Clock, queue_size=10) if config.publish_clock else None
+        _warn_of_clock_mismatch(config.publish_clock, bool(rospy.get_param("/use_sim_time", False)))
         self.tf = tf2_ros.TransformBroadcaster()
         self._static = tf2_ros.StaticTransformBroadcaster()
-        self._static.sendTransform(static_transforms(rospy.Time.now(), [
+        self._static.sendTransform(static_transforms(self._stamp(self.sim.steps), [
             (config.map_frame, config.odom_frame, 0.0, 0.0),
             (config.base_frame, config.laser_frame, LASER_X, 0.2)]))
         rospy.Subscriber("cmd_vel", Twist, self.on_cmd, queue_size=5)
         rospy.Subscriber("initialpose", PoseWithCovarianceStamped, self.on_pose, queue_size=1)
         rospy.Subscriber("~obstacles_in", PointStamped, self.on_obstacle, queue_size=10)
         rospy.Service("~clear_obstacles", Trigger, self.on_clear)
-        run_at(config.time_scale / config.dt, self.step)
+        # rospy.Rate follows /clock under /use_sim_time: with ~publish_clock only this loop
+        # advances it, so it runs on the wall clock
+        loop = run_at_wall_clock if config.publish_clock else run_at
+        loop(config.time_scale / config.dt, self.step)
 
     def on_cmd(self, msg: Twist) -> None:
         with self.lock:
@@ -152,9 +163,11 @@ class BuildingSim:
     def step(self) -> None:
         with self.lock:
             applied = self.sim.step()
-            state, status = self.sim.state.copy(), self.sim.status
-            seen = self._sense() if self.sim.steps % self.scan_every == 0 else None
-        stamp, config = rospy.Time.now(), self.config
+            state, status, steps = self.sim.state.copy(), self.sim.status, self.sim.steps
+            seen = self._sense() if steps % self.scan_every == 0 else None
+        stamp, config = self._stamp(steps), self.config
+        if self.clock is not None:      # first, so the stamps below are never ahead of /clock
+            self.clock.publish(Clock(clock=stamp))
         self.odom.publish(odometry_msg(stamp, config.odom_frame, config.base_frame, *state))
         self.tf.sendTransform(base_transform(stamp, config.odom_frame, config.base_frame,
                                              *state[:3]))
@@ -171,10 +184,31 @@ class BuildingSim:
             self.status.publish(String(data=status))
             self._last_status = status
 
+    def _stamp(self, steps: int) -> rospy.Time:
+        """The stamp after `steps` steps: the simulated time with ~publish_clock, else ROS time.
+
+        Simulated time starts at 0 as in Gazebo and Stage, which is what nodes under
+        /use_sim_time expect: the same seed gives the same stamps on every run, and no stamp
+        passes for wall time (in a bag, beside real data)."""
+        if self.clock is None:
+            return rospy.Time.now()
+        return rospy.Time(0, int(round(steps * self.config.dt * 1e9)))
+
     def _sense(self):
         """(ranges, tracked people, all people) now: called under the lock."""
         return (self.sim.scan(self.sensors.scan_angles, self.sensors.scan_range),
                 self.sim.tracked(self.config.people_range), self.sim.truth())
+
+
+def _warn_of_clock_mismatch(publish_clock: bool, use_sim_time: bool) -> None:
+    """One warning at start-up when the simulator and the other nodes disagree on the clock."""
+    if use_sim_time and not publish_clock:
+        rospy.logwarn("building_sim: /use_sim_time is true but ~publish_clock is false: this "
+                      "node will not publish /clock and waits for another node's (set "
+                      "~publish_clock true to have the simulator publish it)")
+    elif publish_clock and not use_sim_time:
+        rospy.logwarn("building_sim: ~publish_clock is true but /use_sim_time is false: the "
+                      "other nodes run on wall time while the stamps are simulated time from 0")
 
 
 def _people(report, stamp, frame_id: str) -> People:

@@ -2,6 +2,7 @@
 on a map file), publishing the robot's standard sensor topics, each from its own thread."""
 import math
 import threading
+import time
 from typing import Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -23,7 +24,7 @@ from robot_sim.params import SensorSimParams
 from robot_sim.people import PeopleSimulator
 
 __all__ = ["SensorSim", "LASER_X", "people_msg", "odometry_msg", "base_transform", "scan_msg",
-           "static_transforms", "run_at", "start"]
+           "static_transforms", "run_at", "run_at_wall_clock", "start"]
 
 LASER_X = 0.1      # the laser is this far ahead of base_link (the static base_link -> laser tf)
 
@@ -242,6 +243,31 @@ def run_at(rate_hz: float, publish: Callable[[], None]) -> threading.Thread:
             try:
                 rate.sleep()
             except rospy.ROSInterruptException:
+                break
+    thread = threading.Thread(target=loop, daemon=True)
+    thread.start()
+    return thread
+
+
+def run_at_wall_clock(rate_hz: float, publish: Callable[[], None]) -> threading.Thread:
+    """`run_at` on the wall clock even with /use_sim_time true: for the node that publishes /clock
+    (a rospy.Rate would wait for the clock this loop advances). Like rospy.Rate, a loop more than
+    a period late starts again from now instead of catching up in a burst."""
+    if not rate_hz > 0:
+        raise ValueError(f"a loop's rate must be positive, got {rate_hz}")
+    period = 1.0 / rate_hz
+    stopped = threading.Event()
+    rospy.on_shutdown(stopped.set)
+
+    def loop():
+        due = time.monotonic()
+        while not rospy.is_shutdown():
+            publish()
+            due += period
+            now = time.monotonic()
+            if now - due > period:
+                due = now
+            if stopped.wait(max(0.0, due - now)):
                 break
     thread = threading.Thread(target=loop, daemon=True)
     thread.start()
