@@ -65,7 +65,7 @@ def free_map():
 
 
 def test_path_mode_follows_the_path_stops_inside_the_safety_margin_and_reports_blocked(
-        rospy_node, roslaunch, tmp_path):
+        rospy_node, roslaunch, tmp_path, request):
     launch = roslaunch.node("lfd_controller", "reward_controller",
                             params={"reward_file": str(hallway_reward_file(tmp_path)),
                                     "frame": "odom", "blocked_after": 2.0})
@@ -74,6 +74,8 @@ def test_path_mode_follows_the_path_stops_inside_the_safety_margin_and_reports_b
     publishers = {name: rospy.Publisher(f"/{name}", kind, queue_size=2, latch=True)
                   for name, kind in (("odom", Odometry), ("scan", LaserScan), ("people", People),
                                      ("path", Path), ("map", OccupancyGrid), ("goal", PoseStamped))}
+    # latched: left registered, a later test's nodes in this process would get this map and scan
+    request.addfinalizer(lambda: [publisher.unregister() for publisher in publishers.values()])
     cmd, diagnostics = Latest("/cmd_vel", Twist), Latest("/diagnostics", DiagnosticArray)
     path = Path()
     path.header.frame_id = "odom"
