@@ -16,6 +16,8 @@ from typing import Optional
 
 import numpy as np
 
+from lfd_controller.hallway_features import near_people
+
 __all__ = ["people_holding", "ways_on", "GivingWay", "GIVE_WAY_ROOMS"]
 
 # A person standing (slower than STILL m/s) within HOLD_REACH m of the robot, in front of it,
@@ -66,8 +68,7 @@ def people_holding(state, people, velocities, earlier=(), *, names=None,
                 walked[i] |= bool(np.any(np.hypot(*(before[moving] - people[i]).T) <= ARRIVED))
     held_by = np.asarray(held_by, float).reshape(-1, 2)
     if len(held_by) and len(people):
-        walked |= np.hypot(*(people[:, None, :] - held_by[None, :, :]).transpose(2, 0, 1)
-                           ).min(axis=1) <= HELD_AT
+        walked |= near_people(people, held_by, HELD_AT)
     return (np.hypot(*offset.T) <= reach) & ahead & (speeds < STILL) & walked
 
 
