@@ -59,7 +59,10 @@ __all__ = ["HALLWAY_DRIVING", "HALLWAY_SAFETY", "room_margin", "TaskBuilder", "H
 # constant-velocity prediction is not worth more), warm start + one turning or detour seed per
 # cycle (detours 0.9 m beside what blocks the way to the waypoint; after 2 s standing in front
 # of something static, a detour past it: planner.RecedingHorizonController's unstall),
-# discount 0.97, a barrier 0.1 m beyond touching, a safety stop (zero speed; turning in place
+# discount 0.97, a barrier 0.1 m beyond touching a person or a scan point (a taught reward brings
+# the person's own room to people; walls and clutter keep 0.1 m: the person's room to people is
+# no room to a door frame, and a barrier wider than half a narrow door's spare width held the
+# planner before it), a safety stop (zero speed; turning in place
 # allowed) when moving on would bring the scan within 0.05 m of the robot's edge, the path
 # reported blocked after 20 s standing still or 60 s held up (without 0.3 m of progress), a
 # detour after 4 s held up and backing up the next time, a detour at once round something the map
@@ -72,7 +75,7 @@ HALLWAY_DRIVING = {"horizon": 12, "plan_dt": 0.4, "terminal": 0.0, "spread_seeds
                    "discount": 0.97, "max_iter": 12, "seed_turns": (0.0, 1.0, -1.0),
                    "detour": 0.9, "unstall": 2.0}
 HALLWAY_SAFETY = {"robot_radius": 0.18, "person_radius": 0.25, "barrier_margin": 0.1,
-                  "stop_margin": 0.05, "blocked_after": 20.0, "lookahead": 4.0,
+                  "wall_margin": 0.1, "stop_margin": 0.05, "blocked_after": 20.0, "lookahead": 4.0,
                   "replan_after": 4.0, "replan_ahead": 2.5, "give_way": True}
 WINDOW, STRIDE = 40, 20
 # The safety stop looks this far (m) along the command beyond the stopping distance, and lets
@@ -176,12 +179,14 @@ class TaskBuilder:
 
 
 class HallwayBarrier:
-    """A reward plus -scale ((r + margin - d) / margin)^2 for each scan point (r: the robot's
-    radius) and each predicted person (r: both radii) closer than r + margin (planning only)."""
+    """A reward plus -scale ((r + m - d) / m)^2 for each predicted person (r: both radii, m:
+    `margin`) and each scan point (r: the robot's radius, m: `wall_margin`, by default `margin`)
+    closer than r + m (planning only)."""
 
     def __init__(self, reward, *, robot_radius: float, person_radius: float, margin: float,
-                 scale: Optional[float] = None):
+                 wall_margin: Optional[float] = None, scale: Optional[float] = None):
         self.reward, self.margin = reward, float(margin)
+        self.wall_margin = float(margin if wall_margin is None else wall_margin)
         self.robot_radius, self.person_radius = float(robot_radius), float(person_radius)
         self.scale = float(scale if scale is not None else 10.0 * np.max(np.abs(reward.weights)))
 
@@ -191,19 +196,20 @@ class HallwayBarrier:
         rd = self.reward.derivatives(states, actions, times, task, order=order)
         states = np.atleast_2d(np.asarray(states, float))
         value, rx = rd.value.copy(), rd.rx.copy()
-        groups = [(task.points[None], self.robot_radius)]
+        groups = [(task.points[None], self.robot_radius, self.wall_margin)]
         if len(task.people):
-            groups.append((task.people_at(times), self.robot_radius + self.person_radius))
-        for centres, reach in groups:
+            groups.append((task.people_at(times), self.robot_radius + self.person_radius,
+                           self.margin))
+        for centres, reach, margin in groups:
             if centres.shape[1] == 0:
                 continue
             offset = states[:, None, :2] - centres
             distance = np.sqrt(np.maximum((offset ** 2).sum(axis=2), 1e-18))
-            depth = np.maximum(reach + self.margin - distance, 0.0) / self.margin
+            depth = np.maximum(reach + margin - distance, 0.0) / margin
             if not depth.any():
                 continue
             value -= self.scale * (depth ** 2).sum(axis=1)
-            pull = (2.0 * self.scale * depth / self.margin / distance)[..., None] * offset
+            pull = (2.0 * self.scale * depth / margin / distance)[..., None] * offset
             rx[:, :2] += pull.sum(axis=1)
         return RewardDerivatives(value, rx, rd.ru)
 
@@ -227,7 +233,8 @@ class HallwayController:
     def __post_init__(self):
         planned = HallwayBarrier(self.reward, robot_radius=self.safety["robot_radius"],
                                  person_radius=self.safety["person_radius"],
-                                 margin=self.safety["barrier_margin"])
+                                 margin=self.safety["barrier_margin"],
+                                 wall_margin=self.safety.get("wall_margin"))
         budget = None if self.budget is None else PLANNING_SHARE * self.budget
         self.planner = RecedingHorizonController(planned, self.model, budget=budget,
                                                  **self.settings)

@@ -124,8 +124,10 @@ class RewardControllerParams(NodeConfig):
                                  "way and wait for them to pass")
     laser_offset: float = param(0.1, "path mode: the laser frame's distance ahead of the base (m)")
     person_radius: float = param(0.25, "path mode: radius of a tracked person (m)")
-    barrier_margin: float = param(0.1, "path mode: fixed barrier this far (m) beyond touching a "
-                                       "scan point or a person")
+    barrier_margin: float = param(0.1, "path mode: barrier this far (m) beyond touching a person "
+                                       "(a taught reward brings the person's room to people)")
+    wall_margin: float = param(0.1, "path mode: barrier this far (m) beyond touching a scan "
+                                    "point (walls, door frames, clutter)")
     reward_settings: bool = param(True, "drive with the controller settings saved with the reward "
                                         "(learn_reward --kind person saves horizon, plan_dt, "
                                         "terminal, detour, spread_seeds, discount, "
@@ -150,7 +152,8 @@ class RewardControllerParams(NodeConfig):
                               f"got {self.min_horizon!r}")
         if self.arrival < 0:
             raise ConfigError(f"~arrival must be >= 0 (0: off), got {self.arrival!r}")
-        for name in ("lookahead", "blocked_after", "barrier_margin", "person_radius"):
+        for name in ("lookahead", "blocked_after", "barrier_margin", "wall_margin",
+                     "person_radius"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"~{name} must be positive, got {getattr(self, name)!r}")
         if self.replan_after < 0:
@@ -168,7 +171,8 @@ class RewardControllerParams(NodeConfig):
     def hallway_safety(self) -> Dict[str, float]:
         """The path mode's safety settings (lfd_controller.hallway.HALLWAY_SAFETY's keys)."""
         return {"robot_radius": self.robot_radius, "person_radius": self.person_radius,
-                "barrier_margin": self.barrier_margin, "stop_margin": self.safety_margin,
+                "barrier_margin": self.barrier_margin, "wall_margin": self.wall_margin,
+                "stop_margin": self.safety_margin,
                 "blocked_after": self.blocked_after, "lookahead": self.lookahead,
                 "replan_after": self.replan_after, "replan_ahead": self.replan_ahead,
                 "give_way": self.give_way}
