@@ -8,6 +8,8 @@ import pytest
 
 from lfd_controller.hallway import (
     HALLWAY_DRIVING,
+    HALLWAY_SAFETY,
+    HallwayBarrier,
     HallwayController,
     TaskBuilder,
     fit_hallway_reward,
@@ -170,6 +172,44 @@ def test_what_stands_close_behind_or_beside_does_not_stop_the_robot_driving_on()
     state = np.array([1.0, 1.3, 0.0, 0.3, 0.0])
     command = controller.act(state, 0.0, angles, ranges, np.zeros((0, 2)), np.zeros((0, 2)))
     assert command[0] > 0.1 and controller.status_ == "following"
+
+
+def test_the_barrier_keeps_the_taught_margin_from_people_and_the_wall_margin_from_the_scan():
+    reward = straight_reward()
+    task = HallwayTask([5.0, 1.3], [9.0, 1.3], points=[[2.0, 1.6]], people=[[2.0, 0.7]],
+                       velocities=[[0.0, 0.0]])
+    barrier = HallwayBarrier(reward, robot_radius=0.18, person_radius=0.25, margin=0.25,
+                             wall_margin=0.1)
+    # 0.3 m from the scan point (beyond 0.18 + 0.1), 0.6 m from the person (inside 0.43 + 0.25)
+    state = np.array([[2.0, 1.3, 0.0, 0.3, 0.0]])
+    action, times = np.zeros((1, 2)), np.zeros(1)
+    plain = reward.derivatives(state, action, times, task).value[0]
+    person_only = 10.0 * np.max(np.abs(reward.weights)) * ((0.43 + 0.25 - 0.6) / 0.25) ** 2
+    assert barrier.derivatives(state, action, times, task).value[0] == pytest.approx(
+        plain - person_only)
+    # the same taught margin for the scan too (wall_margin not given): the scan point counts
+    same = HallwayBarrier(reward, robot_radius=0.18, person_radius=0.25, margin=0.25)
+    assert same.derivatives(state, action, times, task).value[0] < plain - person_only - 1.0
+
+
+def test_a_controller_taught_a_wide_room_to_people_still_drives_through_a_narrow_door():
+    # a 0.6 m door across the corridor: 0.3 m each side of the robot's centre, more than the
+    # safety stop's 0.23 m but less than the robot's radius plus a taught margin of 0.25 m
+    scene = corridor(length=7.0)
+    scene.grid.cells[:, 40] = OCCUPIED
+    scene.grid.cells[10:16, 40] = FREE
+    controller = HallwayController(
+        straight_reward(), scene.path, Unicycle(0.1), budget=None, grid=scene.grid,
+        settings=dict(HALLWAY_DRIVING, max_iter=6),
+        safety=dict(HALLWAY_SAFETY, barrier_margin=0.25))
+    held = {}
+
+    def every_third_step(state, t, seen):
+        if int(round(t / 0.1)) % 3 == 0:
+            held["command"] = controller.act(state, t, seen.angles, seen.ranges, seen.people,
+                                             seen.velocities)
+        return held["command"]
+    assert drive_figures(drive(scene, every_third_step, max_time=60.0))["success"]
 
 
 def test_the_acceptance_check_refuses_only_failing_where_the_person_succeeded():

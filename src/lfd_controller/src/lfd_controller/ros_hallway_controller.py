@@ -41,7 +41,8 @@ class HallwayControllerNode:
       ~replan_ahead (2.5 m: with a map, that detour at once round something the map lacks on
       this much of the path ahead),
       ~give_way (true: held up by someone who stopped in front, first move out of their way),
-      ~laser_offset (0.1 m), ~person_radius (0.25 m), ~barrier_margin (0.1 m).
+      ~laser_offset (0.1 m), ~person_radius (0.25 m), ~barrier_margin (0.1 m: beyond touching
+      a person), ~wall_margin (0.1 m: beyond touching a scan point).
     Topics in: odom (nav_msgs/Odometry, pose in the path's frame), path (nav_msgs/Path: the
       global plan, e.g. move_base's; followed from its first pose; one ending within
       ~goal_tolerance of the current goal is a re-plan, keeping the controller: along the same
