@@ -87,6 +87,17 @@ def test_a_person_waits_rather_than_walk_into_the_robot():
     assert walking.position(8.0)[0] == pytest.approx(1.0 + 0.68, abs=0.15)
 
 
+def test_a_person_setting_off_beside_the_robot_waits_rather_than_walk_into_it():
+    # standing 0.48 m from the robot's centre (0.05 m from touching), they set off across its
+    # spot between two steps: the first step would take them 0.06 m, into the robot
+    crossing = Walker("p1", "crossing", np.array([[1.0, 2.48], [1.0, 0.5]]), speed=1.2,
+                      depart=0.95)
+    scene = open_scene([crossing])
+    result = drive(scene, lambda state, t, obs: np.zeros(2), max_time=3.0)
+    assert result.collision is None
+    assert crossing.position(3.0)[1] == pytest.approx(2.48)
+
+
 def test_a_person_coming_round_a_corner_waits_while_the_robot_stands_where_they_come_in():
     # they would come in 0.35 m beside the robot (which stands at x = 1 m), at 1 s
     entering = Walker("p1", "overtaking", np.array([[1.0, 2.35], [1.0, 3.8]]), speed=0.2,

@@ -99,8 +99,8 @@ class Walker:
                 self.holding = True
                 return
             self.entered = True
-        if self.speed <= 0 or not self.present(t) or t < self.depart:
-            return
+        if self.speed <= 0 or not self.present(t) or t + dt <= self.depart:
+            return      # (the step they set off in counts: they would walk into it there too)
         here, there = self.position(t), self.position(t + dt)
         ahead = np.dot(there - here, np.asarray(robot) - here) > 0
         if ahead and np.hypot(*(there - robot)) < room:
