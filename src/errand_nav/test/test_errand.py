@@ -67,6 +67,17 @@ def test_what_the_laser_showed_while_held_counts_as_in_the_way_and_progress_forg
     assert len(job.saw_blocking(np.zeros((0, 2)))) == 3         # kept for the errand, once
 
 
+def test_kept_obstacles_a_newer_scan_sees_past_are_forgotten_and_the_rest_kept():
+    job = errand()
+    for look in range(3):                                       # a group standing in the way
+        job.sighted(np.array([[2.6, 0.0], [2.6, 0.3], [5.0, 1.0]]))
+    assert len(job.saw_blocking(np.zeros((0, 2)))) == 3
+    forgotten = job.seen_clear(lambda points: points[:, 0] < 3.0)    # they left; not the cart
+    assert forgotten == 2 and job.obstacles.tolist() == [[5.0, 1.0]]
+    assert job.seen_clear(lambda points: np.zeros(len(points), bool)) == 0
+    assert job.saw_blocking(np.zeros((0, 2))).tolist() == [[5.0, 1.0]]
+
+
 def test_a_forecast_look_comes_every_period_while_driving():
     job = errand()
     for t in range(0, 30, 3):

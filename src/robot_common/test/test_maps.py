@@ -114,6 +114,37 @@ def test_a_point_falls_in_the_beam_that_points_at_it():
     assert beams.tolist() == [2, 0, -1]
 
 
+def test_a_beam_reaches_its_return_the_range_max_without_one_and_nothing_when_invalid():
+    from robot_common.maps import beam_reach
+
+    ranges = [2.0, float("inf"), 8.0, 9.5, float("nan"), 0.05, float("-inf")]
+    assert beam_reach(ranges, 0.1, 8.0).tolist() == [2.0, 8.0, 8.0, 8.0, 0.0, 0.0, 0.0]
+
+
+def test_a_point_is_seen_past_only_when_the_beams_by_it_all_reach_beyond_it():
+    from robot_common.maps import seen_through
+
+    angles = np.radians(np.arange(-90.0, 91.0, 1.0))          # every degree, facing +x
+    reach = np.full(len(angles), 5.0)
+    reach[90] = 2.0                                             # a return straight ahead at 2 m
+    reach[120] = 3.0                                            # and one at 30 degrees, 3 m
+    at30 = np.array([math.cos(math.radians(30.0)), math.sin(math.radians(30.0))])
+    points = np.array([[1.0, 0.0],          # short of the return ahead: seen past
+                       [2.0, 0.0],          # the return itself: not
+                       [3.0, 0.0],          # behind it: not
+                       [-1.0, 0.0],         # behind the sensor, outside the field of view: not
+                       [0.0, 4.95],         # within 0.1 m of the beams' reach: not
+                       [0.0, 4.0],          # at the last beam, well inside its reach: seen past
+                       *(2.95 * at30[None]),    # in the beam beside one returning at 3 m: not
+                       *(1.5 * at30[None])])
+    assert seen_through((0.0, 0.0, 0.0), angles, reach, points, 0.1).tolist() == [
+        True, False, False, False, False, True, False, True]
+    # the beam at 31 degrees holds (2.9 cos 31, 2.9 sin 31); its neighbour at 30 returns at 3 m
+    near = 2.95 * np.array([math.cos(math.radians(31.0)), math.sin(math.radians(31.0))])
+    assert not seen_through((0.0, 0.0, 0.0), angles, reach, near[None], 0.1)[0]
+    assert seen_through((0.0, 0.0, 0.0), angles, reach, np.zeros((0, 2))).shape == (0,)
+
+
 def test_only_scan_points_the_map_does_not_explain_are_unmapped():
     cells = np.full((40, 40), FREE, dtype=np.int8)
     cells[:, 30:] = OCCUPIED                                   # a wall from x = 3.0 m

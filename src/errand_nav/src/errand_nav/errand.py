@@ -7,7 +7,7 @@ crowd forecast is due again. `with_obstacles` marks laser points on a copy of th
 re-plan goes round what blocked the path (move_base's obstacle layer does the same)."""
 import math
 from dataclasses import dataclass, field
-from typing import List, Optional, Sequence, Tuple
+from typing import Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -64,7 +64,8 @@ class Errand:
     last_plan: float = 0.0
     replans: int = 0
     # what the laser showed in the way when the path was blocked (map frame), kept for the
-    # errand so that a re-plan never returns to a way already found blocked
+    # errand so that a re-plan never returns to a way already found blocked - until a newer
+    # scan sees past it (seen_clear)
     obstacles: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     # what it showed since the robot last got on: held up, a controller trying its own
     # recoveries may have turned its back on what holds it when the path counts as blocked
@@ -85,6 +86,16 @@ class Errand:
                           return_index=True)[1]
         self.obstacles = seen[np.sort(cells)]
         return self.obstacles
+
+    def seen_clear(self, sees_past: Callable[[np.ndarray], np.ndarray]) -> int:
+        """Forget the kept obstacles that a newer scan sees past (`sees_past`: points (N, 2) ->
+        mask, robot_common.maps.seen_through): people who stood in a way and left no longer
+        close it for the rest of the errand. How many were forgotten."""
+        if not len(self.obstacles):
+            return 0
+        clear = np.asarray(sees_past(self.obstacles), bool)
+        self.obstacles = self.obstacles[~clear]
+        return int(clear.sum())
 
     def follow(self, path: np.ndarray, now: float) -> None:
         """A new path to follow from now on (progress is measured along it)."""

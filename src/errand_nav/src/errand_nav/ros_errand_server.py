@@ -22,7 +22,7 @@ from errand_nav.planning import CrowdPlanner, PlannedPath
 from errand_nav.ros_forecast import ask_forecast
 from errand_nav.ros_places import PlaceGoals
 from robot_common.gridplan import NoPathError
-from robot_common.maps import load_map, unmapped, yaw_to_quaternion
+from robot_common.maps import beam_reach, load_map, seen_through, unmapped, yaw_to_quaternion
 from robot_common.ros_maps import grid_to_msg, msg_to_grid
 from robot_common.ros_node import path_msg, pose_2d, read_config
 
@@ -31,6 +31,9 @@ from robot_common.ros_node import path_msg, pose_2d, read_config
 HELD = 1.0
 # A laser point within MAP_SLACK m of a wall of the map is that wall (robot_common.maps.unmapped).
 MAP_SLACK = 0.15
+# A point kept as in the way is forgotten once the beams by it all reach this far (m) past it
+# (robot_common.maps.seen_through): a person standing there has left.
+CLEAR_SLACK = 0.1
 
 __all__ = ["ErrandServer", "start"]
 
@@ -150,24 +153,48 @@ class ErrandServer:
         x, y = _moved(frame_pose, [pose.pose.position.x, pose.pose.position.y])[0]
         return float(x), float(y)
 
-    def scan_points(self, near: Tuple[float, float], reach: float) -> np.ndarray:
-        """The latest scan's points (map frame) within `reach` m of `near`."""
+    def latest_scan(self) -> Optional[Tuple[Tuple[float, float, float], np.ndarray, np.ndarray,
+                                             np.ndarray]]:
+        """The latest scan as (laser pose in the map frame, angles, returns - NaN where a beam
+        has none -, reach: robot_common.maps.beam_reach), or None when there is none yet or its
+        frame is not in tf."""
         with self.lock:
             scan = self.scan
         if scan is None:
-            return np.zeros((0, 2))
+            return None
         try:
             laser = pose_2d(self.tf_buffer.lookup_transform(
                 self.config.map_frame, scan.header.frame_id, rospy.Time(0), rospy.Duration(0.5)))
         except (tf2_ros.LookupException, tf2_ros.ConnectivityException,
                 tf2_ros.ExtrapolationException):
+            return None
+        angles = scan.angle_min + scan.angle_increment * np.arange(len(scan.ranges))
+        reach = beam_reach(scan.ranges, scan.range_min, scan.range_max)
+        returned = (reach > 0.0) & (reach < scan.range_max)
+        return laser, angles, np.where(returned, reach, np.nan), reach
+
+    def scan_points(self, near: Tuple[float, float], reach: float) -> np.ndarray:
+        """The latest scan's returns (map frame) within `reach` m of `near`."""
+        scan = self.latest_scan()
+        if scan is None:
             return np.zeros((0, 2))
-        ranges = np.asarray(scan.ranges, float)
-        angles = scan.angle_min + scan.angle_increment * np.arange(len(ranges))
-        ok = np.isfinite(ranges) & (ranges > scan.range_min) & (ranges < scan.range_max)
+        laser, angles, ranges, _ = scan
+        ok = np.isfinite(ranges)
         points = _moved(laser, np.column_stack([ranges[ok] * np.cos(angles[ok]),
                                                 ranges[ok] * np.sin(angles[ok])]))
         return points[np.hypot(points[:, 0] - near[0], points[:, 1] - near[1]) <= reach]
+
+    def forget_seen_clear(self, errand: Errand) -> None:
+        """Forget the errand's kept obstacles that the latest scan sees past."""
+        scan = self.latest_scan() if len(errand.obstacles) else None
+        if scan is None:
+            return
+        laser, angles, _, reach = scan
+        forgotten = errand.seen_clear(lambda points: seen_through(
+            laser, angles, reach, points, CLEAR_SLACK))
+        if forgotten:
+            rospy.loginfo(f"errand_server: forgot {forgotten} laser points kept as in the way: "
+                          f"the laser sees past them now ({len(errand.obstacles)} kept)")
 
     def unmapped_points(self, grid, pose) -> np.ndarray:
         """The latest scan's points within obstacle_range of `pose` that `grid` lacks."""
@@ -313,6 +340,7 @@ class ErrandServer:
         verdict = errand.check(pose[:2], now)
         with self.lock:
             grid = self.planner.grid
+        self.forget_seen_clear(errand)
         if verdict.action == "go" and now - errand.last_progress >= HELD:
             errand.sighted(self.unmapped_points(grid, pose))
         if verdict.action == "arrived":

@@ -226,6 +226,37 @@ def beam_indices(pose: Tuple[float, float, float], angles: np.ndarray, px, py) -
     return np.where((beam >= 0) & (beam < len(angles)), beam, -1)
 
 
+def beam_reach(ranges, range_min: float, range_max: float) -> np.ndarray:
+    """How far each beam of a sensor_msgs/LaserScan saw (REP 117): its range when within
+    (range_min, range_max), range_max for no return (+inf, or range_max and beyond), 0 for an
+    invalid reading (NaN, -inf, range_min or nearer)."""
+    ranges = np.asarray(ranges, float)
+    with np.errstate(invalid="ignore"):
+        returned = np.isfinite(ranges) & (ranges > range_min) & (ranges < range_max)
+        beyond = np.isposinf(ranges) | (np.isfinite(ranges) & (ranges >= range_max))
+    return np.where(returned, ranges, np.where(beyond, float(range_max), 0.0))
+
+
+def seen_through(pose: Tuple[float, float, float], angles: np.ndarray, reach: np.ndarray,
+                 points, slack: float = 0.1) -> np.ndarray:
+    """Which `points` (N, 2) a scan sees past (move_base's costmaps clear by the same rule): the
+    beam whose direction holds the point and the beams either side of it (sensor at `pose` x, y,
+    yaw; sensor-frame `angles`, evenly spaced) each reach more than `slack` m beyond it (`reach`:
+    how far each beam saw, beam_reach). A point outside the field of view, or behind a return,
+    is not seen past."""
+    points = np.asarray(points, float).reshape(-1, 2)
+    reach = np.asarray(reach, float)
+    if not len(points) or not len(reach):
+        return np.zeros(len(points), bool)
+    beam = beam_indices(pose, angles, points[:, 0], points[:, 1])
+    distance = np.hypot(points[:, 0] - pose[0], points[:, 1] - pose[1])
+    clear = beam >= 0
+    for side in (-1, 0, 1):
+        index = np.clip(beam + side, 0, len(reach) - 1)
+        clear &= reach[index] > distance + slack
+    return clear
+
+
 def yaw_to_quaternion(yaw: float) -> Tuple[float, float, float, float]:
     """(x, y, z, w) of a rotation about z."""
     return 0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)
