@@ -69,7 +69,7 @@ def test_what_the_laser_showed_while_held_counts_as_in_the_way_and_progress_forg
 
 def test_kept_obstacles_a_newer_scan_sees_past_are_forgotten_and_the_rest_kept():
     job = errand()
-    for look in range(3):                                       # a group standing in the way
+    for _ in range(3):                                       # a group standing in the way
         job.sighted(np.array([[2.6, 0.0], [2.6, 0.3], [5.0, 1.0]]))
     assert len(job.saw_blocking(np.zeros((0, 2)))) == 3
     forgotten = job.seen_clear(lambda points: points[:, 0] < 3.0)    # they left; not the cart
