@@ -171,6 +171,20 @@ def test_recordings_where_the_person_never_arrived_check_nothing_and_are_refused
     assert "nothing to check the controller against" in str(RewardNotAcceptedError(checked))
 
 
+def test_steps_before_the_recorders_first_scan_are_left_out_of_the_windows(learned):
+    # the recorder connected to /scan three steps after the drive started (its subscriptions
+    # connect one by one): the windows start at the first step with a scan
+    (demo, sensors), _ = learned
+    late = RecordedSensors(sensors.path, sensors.scans[3:], sensors.people)
+    windows = recorded_windows(demo, late)
+    assert np.allclose(windows[0].start, demo.states[2])        # the state at step 3
+    assert np.allclose(windows[0].actions, demo.actions[3:3 + len(windows[0].actions)])
+    assert len(windows[0].actions) == len(recorded_windows(demo, sensors)[0].actions)
+    after = RecordedSensors(sensors.path, [(1000.0, *scan[1:]) for scan in sensors.scans[:2]])
+    with pytest.raises(DemonstrationError, match="no laser scan within the drive"):
+        recorded_windows(demo, after)
+
+
 def test_scans_from_outside_the_drive_are_a_clear_error_naming_the_drive():
     demo, sensors = standing_recording([wall_and_person_scan(100.0)])
     with pytest.raises(DemonstrationError, match="late.bag: no laser scan within the drive"):

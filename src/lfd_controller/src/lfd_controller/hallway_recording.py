@@ -51,16 +51,24 @@ def recorded_windows(demo: Demonstration, sensors: RecordedSensors, *,
     if not sensors.scans:
         raise DemonstrationError("a building demonstration needs the laser scans of the drive")
     states = np.vstack([demo.start[None], demo.states if demo.states is not None else demo.rollout()])
+    times = demo.t0 + np.arange(demo.length) * demo.scenario.dt
+    # a recorder connects to each topic on its own: the first scan may come a step or two after
+    # the drive starts; the steps before it (nothing seen yet) are left out
+    first = int(np.searchsorted(times + 0.05, sensors.scans[0][0]))
+    if first >= demo.length:
+        raise DemonstrationError(f"no laser scan within the drive's {demo.length * demo.scenario.dt:.1f} s "
+                                 f"from episode time {demo.t0:.2f} s")
     builder = TaskBuilder(path, lookahead=lookahead, laser_offset=sensors.laser_offset)
     tasks = []
     no_people = (np.zeros((0, 2)), np.zeros((0, 2)))
-    for k in range(demo.length):
-        t = demo.t0 + k * demo.scenario.dt
+    for k in range(first, demo.length):
+        t = times[k]
         _, angles, ranges = _newest(sensors.scans, t, "laser scan")
         people = _newest(sensors.people, t, "people report")[1:] if sensors.people and \
             sensors.people[0][0] <= t + 0.05 else no_people
         tasks.append(builder(states[k], t, angles, ranges, people[0], people[1]))
-    return hallway_windows(states, demo.actions, tasks, dt=demo.scenario.dt, source=demo.source)
+    return hallway_windows(states[first:], demo.actions[first:], tasks, dt=demo.scenario.dt,
+                           source=demo.source)
 
 
 def moving_speed(demos: Sequence[Demonstration]) -> float:
