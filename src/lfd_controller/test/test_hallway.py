@@ -187,8 +187,9 @@ def test_the_barrier_keeps_the_taught_margin_from_people_and_the_wall_margin_fro
     person_only = 10.0 * np.max(np.abs(reward.weights)) * ((0.43 + 0.25 - 0.6) / 0.25) ** 2
     assert barrier.derivatives(state, action, times, task).value[0] == pytest.approx(
         plain - person_only)
-    # the same taught margin for the scan too (wall_margin not given): the scan point counts
-    same = HallwayBarrier(reward, robot_radius=0.18, person_radius=0.25, margin=0.25)
+    # the same taught margin for the scan too: the scan point counts
+    same = HallwayBarrier(reward, robot_radius=0.18, person_radius=0.25, margin=0.25,
+                          wall_margin=0.25)
     assert same.derivatives(state, action, times, task).value[0] < plain - person_only - 1.0
 
 

@@ -173,9 +173,10 @@ class ErrandServer:
         returned = (reach > 0.0) & (reach < scan.range_max)
         return laser, angles, np.where(returned, reach, np.nan), reach
 
-    def scan_points(self, near: Tuple[float, float], reach: float) -> np.ndarray:
-        """The latest scan's returns (map frame) within `reach` m of `near`."""
-        scan = self.latest_scan()
+    @staticmethod
+    def scan_points(scan, near: Tuple[float, float], reach: float) -> np.ndarray:
+        """The returns (map frame) of `scan` (latest_scan's tuple, or None) within `reach` m of
+        `near`."""
         if scan is None:
             return np.zeros((0, 2))
         laser, angles, ranges, _ = scan
@@ -184,10 +185,11 @@ class ErrandServer:
                                                 ranges[ok] * np.sin(angles[ok])]))
         return points[np.hypot(points[:, 0] - near[0], points[:, 1] - near[1]) <= reach]
 
-    def forget_seen_clear(self, errand: Errand) -> None:
-        """Forget the errand's kept obstacles that the latest scan sees past."""
-        scan = self.latest_scan() if len(errand.obstacles) else None
-        if scan is None:
+    @staticmethod
+    def forget_seen_clear(errand: Errand, scan) -> None:
+        """Forget the errand's kept obstacles that `scan` (latest_scan's tuple, or None) sees
+        past."""
+        if scan is None or not len(errand.obstacles):
             return
         laser, angles, _, reach = scan
         forgotten = errand.seen_clear(lambda points: seen_through(
@@ -196,9 +198,10 @@ class ErrandServer:
             rospy.loginfo(f"errand_server: forgot {forgotten} laser points kept as in the way: "
                           f"the laser sees past them now ({len(errand.obstacles)} kept)")
 
-    def unmapped_points(self, grid, pose) -> np.ndarray:
-        """The latest scan's points within obstacle_range of `pose` that `grid` lacks."""
-        points = self.scan_points(pose[:2], self.config.obstacle_range)
+    def unmapped_points(self, scan, grid, pose) -> np.ndarray:
+        """The points of `scan` (latest_scan's tuple, or None) within obstacle_range of `pose`
+        that `grid` lacks."""
+        points = self.scan_points(scan, pose[:2], self.config.obstacle_range)
         return points[unmapped(grid, points, MAP_SLACK)]
 
     # -- planning ----------------------------------------------------------------------------
@@ -340,9 +343,13 @@ class ErrandServer:
         verdict = errand.check(pose[:2], now)
         with self.lock:
             grid = self.planner.grid
-        self.forget_seen_clear(errand)
-        if verdict.action == "go" and now - errand.last_progress >= HELD:
-            errand.sighted(self.unmapped_points(grid, pose))
+        held = verdict.action == "go" and now - errand.last_progress >= HELD
+        # one scan (one tf lookup) for the whole look, and none when nothing needs it
+        scan = self.latest_scan() if (held or verdict.action == "blocked"
+                                      or len(errand.obstacles)) else None
+        self.forget_seen_clear(errand, scan)
+        if held:
+            errand.sighted(self.unmapped_points(scan, grid, pose))
         if verdict.action == "arrived":
             return "succeeded", f"reached the goal ({verdict.reason})"
         if verdict.action == "blocked":
@@ -351,7 +358,7 @@ class ErrandServer:
                 return "aborted", (f"blocked: {verdict.reason}; gave up after "
                                    f"{self.rules.max_replans} new paths")
             before = len(errand.obstacles)
-            seen = errand.saw_blocking(self.unmapped_points(grid, pose))
+            seen = errand.saw_blocking(self.unmapped_points(scan, grid, pose))
             try:
                 planned = self.plan(pose[:2], errand.goal, now + self.crowd_offset,
                                     obstacles=seen)

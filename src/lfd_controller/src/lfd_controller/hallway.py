@@ -180,13 +180,12 @@ class TaskBuilder:
 
 class HallwayBarrier:
     """A reward plus -scale ((r + m - d) / m)^2 for each predicted person (r: both radii, m:
-    `margin`) and each scan point (r: the robot's radius, m: `wall_margin`, by default `margin`)
-    closer than r + m (planning only)."""
+    `margin`) and each scan point (r: the robot's radius, m: `wall_margin`) closer than r + m
+    (planning only)."""
 
     def __init__(self, reward, *, robot_radius: float, person_radius: float, margin: float,
-                 wall_margin: Optional[float] = None, scale: Optional[float] = None):
-        self.reward, self.margin = reward, float(margin)
-        self.wall_margin = float(margin if wall_margin is None else wall_margin)
+                 wall_margin: float, scale: Optional[float] = None):
+        self.reward, self.margin, self.wall_margin = reward, float(margin), float(wall_margin)
         self.robot_radius, self.person_radius = float(robot_radius), float(person_radius)
         self.scale = float(scale if scale is not None else 10.0 * np.max(np.abs(reward.weights)))
 
@@ -234,7 +233,7 @@ class HallwayController:
         planned = HallwayBarrier(self.reward, robot_radius=self.safety["robot_radius"],
                                  person_radius=self.safety["person_radius"],
                                  margin=self.safety["barrier_margin"],
-                                 wall_margin=self.safety.get("wall_margin"))
+                                 wall_margin=self.safety["wall_margin"])
         budget = None if self.budget is None else PLANNING_SHARE * self.budget
         self.planner = RecedingHorizonController(planned, self.model, budget=budget,
                                                  **self.settings)

@@ -18,6 +18,10 @@ from lfd_controller.hallway import HALLWAY_SAFETY, HallwayDemonstration, TaskBui
 
 __all__ = ["RecordedSensors", "recorded_windows", "moving_speed"]
 
+# A scan or people report counts at a step when it came at most this long (s, half a step)
+# after it: the recorder's clock and the drive's steps are not in lockstep.
+SEEN_SLACK = 0.05
+
 
 @dataclass
 class RecordedSensors:
@@ -32,9 +36,9 @@ class RecordedSensors:
 
 
 def _newest(items: Sequence[Tuple], t: float, what: str):
-    """The last item whose time is at most t (slack: half a step)."""
+    """The last item whose time is at most t (+ SEEN_SLACK)."""
     times = np.array([item[0] for item in items])
-    index = int(np.searchsorted(times, t + 0.05, side="right")) - 1
+    index = int(np.searchsorted(times, t + SEEN_SLACK, side="right")) - 1
     if index < 0:
         raise DemonstrationError(f"no {what} at or before episode time {t:.2f} s")
     return items[index]
@@ -54,7 +58,7 @@ def recorded_windows(demo: Demonstration, sensors: RecordedSensors, *,
     times = demo.t0 + np.arange(demo.length) * demo.scenario.dt
     # a recorder connects to each topic on its own: the first scan may come a step or two after
     # the drive starts; the steps before it (nothing seen yet) are left out
-    first = int(np.searchsorted(times + 0.05, sensors.scans[0][0]))
+    first = int(np.searchsorted(times + SEEN_SLACK, sensors.scans[0][0]))
     if first >= demo.length:
         raise DemonstrationError(f"no laser scan within the drive's {demo.length * demo.scenario.dt:.1f} s "
                                  f"from episode time {demo.t0:.2f} s")
@@ -65,7 +69,7 @@ def recorded_windows(demo: Demonstration, sensors: RecordedSensors, *,
         t = times[k]
         _, angles, ranges = _newest(sensors.scans, t, "laser scan")
         people = _newest(sensors.people, t, "people report")[1:] if sensors.people and \
-            sensors.people[0][0] <= t + 0.05 else no_people
+            sensors.people[0][0] <= t + SEEN_SLACK else no_people
         tasks.append(builder(states[k], t, angles, ranges, people[0], people[1]))
     return hallway_windows(states[first:], demo.actions[first:], tasks, dt=demo.scenario.dt,
                            source=demo.source)
