@@ -13,9 +13,9 @@ For every family F left out, rotated over all families:
   * F's test person gives 10 demonstrations per scenario (static, moving, oscillating obstacle;
     only successful takes, up to 2 tries each); the reward is learned with the chosen settings
     (what `learn_reward --kind person` does) and driven (learning.person_controller with the
-    saved settings) from held-out starts (seed 4) with the node's 0.1 s cycle budget - what a
-    user gets - and, beside it, without a budget; the two unseen layouts are driven with the
-    static reward;
+    saved settings) from held-out starts (seed 4; --test-seed draws others) with the node's
+    0.1 s cycle budget - what a user gets - and, beside it, without a budget; the two unseen
+    layouts are driven with the static reward;
   * a reward the acceptance check refuses is not served: its row scores 0 % (refusals are a
     column), and it is driven anyway to show whether the refusal was right;
   * per row: success, collisions, median time to goal next to the person's own on the same
@@ -257,7 +257,7 @@ def test_row(family, name, choice, runs):
     acceptance = info.get("acceptance") or {}
     refused = reward is not None and not acceptance.get("accepted", True)
     row = {"family": family, "scenario": name, "learned_on": source, "runs": runs,
-           "demos": info["demos"], "learn": info, "refused": refused,
+           "demos": info["demos"], "learn": info, "refused": refused, "test_seed": TEST_SEED,
            "person": summary(drive_person(family, person_seed(family, source, "test"), scenario, starts),
                              scenario),
            "clone": summary(drive_clone(clone, scenario, starts) if reward is not None else failed,
@@ -295,7 +295,7 @@ def add_room(path):
     scenario = scenario_named(row["scenario"])
     folder, source = OUT / "learned", row["learned_on"]
     reward = load_reward(folder / f"{row['family']}__{source}.yaml")
-    starts = scenario.sample_starts(row["runs"], seed=TEST_SEED)
+    starts = scenario.sample_starts(row["runs"], seed=row.get("test_seed", 4))
     episodes, _ = drive_controller(reward, scenario, starts, f"room {row['family']}/{row['scenario']}",
                                    row["learn"]["driving"], None, 0.1)
     person = drive_person(row["family"], person_seed(row["family"], source, "test"), scenario, starts)
@@ -398,7 +398,7 @@ def table(rows):
 
 
 def main(argv=None) -> int:
-    global OUT, DEMOS, VALIDATION_STARTS
+    global OUT, DEMOS, VALIDATION_STARTS, TEST_SEED
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--phase", choices=["validate", "test", "table", "all", "room"], default="all",
                         help="room: add the closest approach to rows written without it")
@@ -408,6 +408,9 @@ def main(argv=None) -> int:
                         help="the rows this process computes (default: all; a layout row needs its "
                              "family's static reward)")
     parser.add_argument("--runs", type=int, default=100, help="held-out starts per test row (100)")
+    parser.add_argument("--test-seed", type=int, default=TEST_SEED,
+                        help=f"the held-out starts' seed ({TEST_SEED}; another seed draws starts no "
+                             "earlier run has seen)")
     parser.add_argument("--out", type=Path, help="result folder (resumable; default artifacts/bench/lfd)")
     parser.add_argument("--choice", nargs=2, metavar=("LEARNER", "CLONE"),
                         help="skip the validation phase: the learner candidate and cloning setting "
@@ -416,6 +419,7 @@ def main(argv=None) -> int:
                         help="a smoke run: 4 demos, 2 validation starts (use with --out)")
     args = parser.parse_args(argv)
     OUT = args.out or OUT
+    TEST_SEED = args.test_seed
     if args.quick:
         DEMOS, VALIDATION_STARTS = 4, 2
     families = args.families or sorted(FAMILIES)

@@ -2,8 +2,10 @@
 demonstrations' starts and nearby ones; refused only where it fails where the person succeeded
 (does not reach, collides, crawls, cuts closer to a moving obstacle than the person did), any
 other mismatch saved with a warning. Calibration brings a crawling reward to the person's pace,
-learn_and_save does not save a refused reward, and a person who never reaches the goal is told
-so. The controllers here run without a cycle budget, so a busy machine changes their cost, not
+aims at the person's speed when their takes wander, goes on until the pace is close (not only
+within the warnings) and makes turning cheaper with a faster pace, never dearer; learn_and_save
+does not save a refused reward, and a person who never reaches the goal is told so. The
+controllers here run without a cycle budget, so a busy machine changes their cost, not
 their drives."""
 import numpy as np
 import pytest
@@ -12,9 +14,12 @@ import yaml
 from lfd_controller.acceptance import (
     FAILURES,
     NoGoalError,
+    _next_scales,
     calibrate,
     compare,
     nearby_starts,
+    on_target,
+    scaled,
     trajectory_statistics,
     verdict,
 )
@@ -47,6 +52,13 @@ def unbudgeted(reward, scenario, margin):
     return person_controller(reward, scenario, budget=None, settings=person_driving(margin))
 
 
+def without_unstall(reward, scenario, margin):
+    """The controller without the unstall rule, which takes a creeping robot past the obstacle
+    on a detour of its own: the pace is the reward's."""
+    return person_controller(reward, scenario, budget=None,
+                             settings=dict(person_driving(margin), unstall=0.0))
+
+
 @pytest.fixture(scope="module")
 def demos(static_scenario):
     taken = person_demos(static_scenario, "tangent", static_scenario.sample_starts(2, seed=51), seed=7,
@@ -73,6 +85,64 @@ def test_statistics_of_a_straight_drive(static_scenario):
     matched = compare({"mean_speed": 0.3, "time": 3.2, "closest": 0.2, "reached": 1.0},
                       {"mean_speed": 0.25, "time": 4.1, "closest": 0.32, "reached": 1.0})
     assert matched == {"mean_speed": True, "time": False, "closest": False, "reached": True}
+    # arriving sooner (a shorter way at the person's speed) is not a mismatch
+    assert compare({"mean_speed": 0.3, "time": 8.0, "closest": 0.2, "reached": 1.0},
+                   {"mean_speed": 0.3, "time": 5.0, "closest": 0.2, "reached": 1.0})["time"]
+
+
+SCALES = {"speed": 1.0, "obstacle": 1.0, "margin": 0.2}
+
+
+def person_and_driven(person_speed, person_time, speed, time):
+    return ({"mean_speed": person_speed, "time": person_time, "closest": 0.25, "closest_min": 0.1,
+             "reached": 1.0},
+            {"mean_speed": speed, "time": time, "closest": 0.25, "closest_min": 0.2, "reached": 1.0})
+
+
+def test_calibration_aims_at_the_persons_speed_when_their_takes_wander():
+    # the person drove 0.37 m/s but took long ways round (11 s); the controller's own way is
+    # shorter (9.4 s at 0.29 m/s): it is sped up to the person's speed, not slowed to their time
+    person, driven = person_and_driven(0.37, 11.0, 0.29, 9.4)
+    matched = compare(person, driven)
+    assert not matched["mean_speed"] and matched["time"]
+    scales = _next_scales(person, driven, matched, [(0.0, np.log(0.29))], SCALES, (0.1, 0.5))
+    assert scales["speed"] == pytest.approx(0.37 / 0.29, rel=0.01)
+    # on a longer way than the person's it aims between their speed and their time, as before
+    person, driven = person_and_driven(0.37, 8.0, 0.30, 12.0)
+    scales = _next_scales(person, driven, compare(person, driven), [(0.0, np.log(0.30))], SCALES,
+                          (0.1, 0.5))
+    timed = 0.30 * 12.0 / 8.0
+    assert scales["speed"] == pytest.approx(np.sqrt(0.37 * timed) / 0.30, rel=0.01)
+
+
+def test_calibration_goes_on_until_the_pace_is_close_not_only_within_the_warnings():
+    # 17 % slower and 23 % longer: no warning, but not yet the person's pace
+    person, driven = person_and_driven(0.395, 5.95, 0.329, 7.3)
+    matched = compare(person, driven)
+    assert matched["mean_speed"] and matched["time"] and not on_target(person, driven)
+    scales = _next_scales(person, driven, matched, [(0.0, np.log(0.329))], SCALES, (0.1, 0.5))
+    assert scales["speed"] > 1.15
+    person, close = person_and_driven(0.395, 5.95, 0.37, 6.2)
+    assert on_target(person, close)
+    # faster than the person within the warning's tolerance is not slowed further (a controller
+    # slowed to the last few per cent can stall)
+    person, brisk = person_and_driven(0.32, 9.25, 0.367, 7.5)
+    assert on_target(person, brisk)
+    assert _next_scales(person, close, compare(person, close), [(0.0, np.log(0.37))], SCALES,
+                        (0.1, 0.5))["speed"] == 1.0
+
+
+def test_turning_is_made_cheaper_with_a_faster_pace_and_never_dearer():
+    brisk = reward_of(BRISK)
+    names = brisk.features.names
+
+    def ratio(reward, name):
+        return reward.weights[names.index(name)] / brisk.weights[names.index(name)]
+    faster, slower = scaled(brisk, 2.0, 1.0), scaled(brisk, 0.5, 1.0)
+    assert ratio(faster, "speed_effort") == ratio(faster, "turn_effort") == pytest.approx(0.5)
+    assert ratio(faster, "turn_squared") == pytest.approx(0.5)
+    assert ratio(slower, "speed_squared") == pytest.approx(2.0) and ratio(slower, "turn_effort") == 1.0
+    assert ratio(faster, "goal_progress") == ratio(slower, "goal_progress") == 1.0
 
 
 def test_the_verdict_refuses_only_failures_where_the_person_succeeded():
@@ -142,19 +212,23 @@ def test_a_reward_that_crawls_is_refused_and_calibration_brings_it_to_the_person
     # replanning every 0.4 s (one planning step), one demonstration and no nearby starts keep the
     # test short
     demos = demos[:1]
-    _, refused = calibrate(crawl, demos, unbudgeted, rounds=1, nearby=0, replan_every=4)
+    _, refused = calibrate(crawl, demos, without_unstall, rounds=1, nearby=0, replan_every=4)
     assert not refused.accepted and refused.failures["crawl"] and not refused.matched["mean_speed"]
     assert refused.driven["mean_speed"] < 0.8 * refused.demonstrated["mean_speed"]
     text = refused.describe()
-    assert "FAILS where the person succeeded: crawls" in text
+    assert "crawls: mean speed" in text.split("FAILS where the person succeeded:")[1]
     assert "NOT matched" in text and "mean speed" in text.split("NOT matched")[1]
-    calibrated, report = calibrate(crawl, demos, unbudgeted, rounds=4, nearby=0, replan_every=4)
+    calibrated, report = calibrate(crawl, demos, without_unstall, rounds=4, nearby=0, replan_every=4)
     assert report.matched["mean_speed"] and report.matched["time"], report.describe()
     assert report.driven["mean_speed"] > 1.3 * refused.driven["mean_speed"]
-    # only the speed penalties were rescaled; the pull toward the goal is the learned one
+    # only the speed penalties and with them the turn penalties were rescaled (the same path at
+    # a faster pace); the pull toward the goal is the learned one
     names = crawl.features.names
     assert calibrated.weights[names.index("goal_progress")] == crawl.weights[names.index("goal_progress")]
     assert calibrated.weights[names.index("speed_effort")] > crawl.weights[names.index("speed_effort")]
+    ratios = {name: calibrated.weights[names.index(name)] / crawl.weights[names.index(name)]
+              for name in ("speed_effort", "speed_squared", "turn_squared", "turn_effort")}
+    assert ratios == pytest.approx({name: ratios["speed_effort"] for name in ratios})
 
 
 def test_learn_and_save_does_not_save_a_refused_reward_and_warns_on_a_mismatch(demos, tmp_path):

@@ -379,3 +379,44 @@ def test_unstall_lets_a_robot_wait_for_a_moving_obstacle_to_pass():
     for k in range(30):                           # 3 s at 10 Hz, the obstacle crossing ahead
         state = model.step(state, controller.act(state, 0.1 * k, task))
     assert controller.escapes_ == 0 and np.hypot(state[0] + 2.5, state[1]) < 0.02, state
+
+
+def test_unstall_counts_a_plan_that_slows_to_a_stop_in_front_of_the_obstacle(static_scenario):
+    """A robot still creeping (above STALL_SPEED) toward a stop in front of a static obstacle is
+    stalling already: its plan ends at rest away from the goal. The rule counts from that plan, not
+    from when the creep drops below STALL_SPEED (3 s later in a drive of a slow person's reward);
+    a plan that keeps moving, or that ends at rest at the goal, is not a stall."""
+    from lfd_controller.learning import person_driving
+    from lfd_controller.planner import STALL_SPEED
+
+    features = person_features()
+    reward = LinearReward([-1.0 if n in ("speed_effort", "turn_effort") else 0.0 for n in features.names],
+                          features)
+    task, model = Task.from_scenario(static_scenario), static_scenario.model()
+
+    class Creeping(RecedingHorizonController):
+        """Plans to slow from the robot's speed to rest over the horizon; commands the plan's start."""
+
+        def _act(self, state, t, task, started=None):
+            self.plan_ = np.column_stack([np.linspace(state[3], 0.0, self.horizon), np.zeros(self.horizon)])
+            self._plan_time = t
+            return self.plan_[0].copy()
+
+    settings = dict(person_driving(0.1), unstall=1.5)
+    settings.pop("collision_margin")
+    assert settings["stall_plans"]
+    standing_only = Creeping(reward, static_scenario.model(), budget=None,
+                             **dict(settings, stall_plans=False))
+    controller = Creeping(reward, static_scenario.model(), budget=None, **settings)
+    for creeping in (standing_only, controller):
+        state = np.array([-2.5, 0.0, 0.0, 0.2, 0.0])
+        for k in range(20):                        # 2 s at 10 Hz
+            state = model.step(state, creeping.act(state, 0.1 * k, task))
+        assert state[3] > STALL_SPEED, state       # still creeping: standing alone does not count
+    assert standing_only.escapes_ == 0 and controller.escapes_ == 1
+    moving = np.column_stack([np.full(controller.horizon, 0.3), np.zeros(controller.horizon)])
+    controller.plan_ = moving
+    assert not controller._plans_to_stop(np.array([-2.5, 0.0, 0.0, 0.3, 0.0]), task, 0.375)
+    controller.plan_ = np.zeros((controller.horizon, 2))
+    assert controller._plans_to_stop(np.array([-2.5, 0.0, 0.0, 0.0, 0.0]), task, 0.375)
+    assert not controller._plans_to_stop(np.array([-0.1, 0.0, 0.0, 0.0, 0.0]), task, 0.375)

@@ -82,11 +82,12 @@ PERSON_TRIM = 0
 # look-ahead let the speed/turn costs stretch the last metres into a creep past the region's
 # edge: sporty static 15/20 -> 20/20 validation starts), and after 1.5 s standing still away from
 # the goal a detour past the obstacle (unstall: the plan's local optimum straight in front of a
-# static obstacle is stable once the calibrated reward drives at a slow person's pace)
-# (RecedingHorizonController options).
+# static obstacle is stable once the calibrated reward drives at a slow person's pace), counted
+# from the first plan that ends standing there (stall_plans: a slow person's reward crept 3 s
+# toward that stop before it stood) (RecedingHorizonController options).
 PERSON_CONTROLLER = {"horizon": 20, "plan_dt": 0.4, "terminal": 0.0, "detour": 0.8,
                      "spread_seeds": True, "discount": 0.97, "min_horizon": 8, "arrival": 0.25,
-                     "unstall": 1.5}
+                     "unstall": 1.5, "stall_plans": True}
 # What reward_controller needs to drive a person reward (saved with it, `controller:` in the file):
 # PERSON_CONTROLLER plus the fixed collision barrier (m beyond touching; planner.CollisionBarrier).
 PERSON_DRIVING = dict(PERSON_CONTROLLER, collision_margin=0.1)

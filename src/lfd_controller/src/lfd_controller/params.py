@@ -99,6 +99,8 @@ class RewardControllerParams(NodeConfig):
     unstall: float = param(0.0, "> 0 (needs ~detour): after this many seconds standing still away "
                                 "from the goal, follow a detour past the obstacle for as long "
                                 "(person rewards: 1.5); 0: off")
+    stall_plans: bool = param(False, "with ~unstall: a plan that ends standing away from the goal "
+                                     "counts as standing still (person rewards: true)")
     frame: str = param("odom", "frame of the published plan")
     enabled: bool = param(True, "drive from the start (service ~enable switches)")
     lookahead: float = param(4.0, "path mode (a hallway reward): the local waypoint this far (m) "
@@ -131,12 +133,14 @@ class RewardControllerParams(NodeConfig):
     reward_settings: bool = param(True, "drive with the controller settings saved with the reward "
                                         "(learn_reward --kind person saves horizon, plan_dt, "
                                         "terminal, detour, spread_seeds, discount, "
-                                        "min_horizon, arrival, unstall, collision_margin; "
+                                        "min_horizon, arrival, unstall, stall_plans, "
+                                        "collision_margin; "
                                         "sim.teach_hallway saves barrier_margin) instead of "
                                         "these")
 
     SAVED_SETTINGS = ("horizon", "plan_dt", "terminal", "detour", "spread_seeds", "discount",
-                      "min_horizon", "arrival", "unstall", "collision_margin", "barrier_margin")
+                      "min_horizon", "arrival", "unstall", "stall_plans", "collision_margin",
+                      "barrier_margin")
 
     def check(self) -> None:
         if not self.rate > 0:
@@ -199,7 +203,8 @@ class RewardControllerParams(NodeConfig):
         return {"horizon": self.horizon, "plan_dt": self.plan_dt, "terminal": self.terminal,
                 "max_iter": self.max_iter, "detour": self.detour,
                 "spread_seeds": self.spread_seeds, "discount": self.discount,
-                "min_horizon": self.min_horizon, "arrival": self.arrival, "unstall": self.unstall}
+                "min_horizon": self.min_horizon, "arrival": self.arrival, "unstall": self.unstall,
+                "stall_plans": self.stall_plans}
 
 
 @dataclass

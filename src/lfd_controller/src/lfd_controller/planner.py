@@ -347,14 +347,17 @@ class RecedingHorizonController:
         given; unstall > 0 (needs detour): after that many seconds standing still away from the
         goal, follow a detour seed past the obstacle for ESCAPE_FACTOR times as long, then plan
         again (`escapes_` counts them): a person who wants the goal does not wait in front of a
-        static obstacle until the time runs out, and the plan's local optimum there is stable.
+        static obstacle until the time runs out, and the plan's local optimum there is stable;
+        stall_plans: a plan that ends standing away from the goal counts as standing (the robot
+        is slowing down to stand there: `_plans_to_stop`).
     """
 
     def __init__(self, reward, model, *, horizon: int = 20, plan_dt: Optional[float] = 0.2,
                  terminal: float = 10.0, max_iter: int = 15, seed_iter: int = 6, seed_every: int = 5,
                  seed_turns: Sequence[float] = (0.0, 1.2, -1.2), budget: Optional[float] = None,
                  detour: float = 0.0, spread_seeds: bool = False, discount: float = 1.0,
-                 min_horizon: int = 0, arrival: float = 0.0, unstall: float = 0.0):
+                 min_horizon: int = 0, arrival: float = 0.0, unstall: float = 0.0,
+                 stall_plans: bool = False):
         if horizon < 2:
             raise LfdError(f"the planning horizon must be at least 2 steps, got {horizon}")
         if plan_dt is not None and not plan_dt > 0:
@@ -383,6 +386,7 @@ class RecedingHorizonController:
         if unstall < 0 or (unstall > 0 and self.detour <= 0):
             raise LfdError(f"unstall must be >= 0 s (0: off) and needs detour > 0, got {unstall!r}")
         self.unstall = float(unstall)
+        self.stall_plans = bool(stall_plans)
         if self.arrival > 0:
             self.reward = ArrivalReward(reward, self.arrival, time_cost=arrival_time_cost(
                 reward, self.model.limits.v_max))
@@ -433,20 +437,23 @@ class RecedingHorizonController:
         return seeds
 
     def _unstalled(self, state, t: float, task: Task, command: np.ndarray) -> np.ndarray:
-        """With unstall > 0: after `unstall` s standing or creeping (below STALL_SPEED) away from
-        the goal in front of a static obstacle (the plan keeps the robot there: a local optimum;
-        waiting for a moving obstacle to pass is what a person who yields does - a blind detour
-        then cuts in front of it),
-        follow a detour seed past the obstacle - on the side away from it, or the robot faces -
-        for ESCAPE_FACTOR x `unstall` s, then plan again."""
+        """With unstall > 0: after `unstall` s standing or creeping (below STALL_SPEED), or
+        with stall_plans planning to (`_plans_to_stop`), away from the goal in front of a static obstacle (the
+        plan keeps the robot there: a local optimum; waiting for a moving obstacle to pass is
+        what a person who yields does - a blind detour then cuts in front of it), follow a
+        detour seed past the obstacle - on the side away from it, or the robot faces - for
+        ESCAPE_FACTOR x `unstall` s, then plan again."""
         if self._escape is not None:
             side, until = self._escape
             if t < until:
                 seed = detour_seeds(self.model, 2, state, t, task, self.detour)[0 if side > 0 else 1]
                 return seed[0]
             self._escape, self._still_since = None, None
-        far = np.hypot(*(np.asarray(task.goal, float) - state[:2])) > max(self.arrival, 0.25) * 1.5
-        if far and abs(state[3]) < STALL_SPEED and abs(command[0]) < STALL_SPEED and _static(task, t):
+        reach = max(self.arrival, 0.25) * 1.5
+        far = np.hypot(*(np.asarray(task.goal, float) - state[:2])) > reach
+        standing = abs(state[3]) < STALL_SPEED and abs(command[0]) < STALL_SPEED
+        if far and _static(task, t) and (standing or (self.stall_plans
+                                                      and self._plans_to_stop(state, task, reach))):
             self._still_since = t if self._still_since is None else self._still_since
             if t - self._still_since >= self.unstall:
                 obstacle = np.asarray(task.obstacle_position(np.array(t)), float).reshape(2)
@@ -462,6 +469,15 @@ class RecedingHorizonController:
         else:
             self._still_since = None
         return command
+
+    def _plans_to_stop(self, state, task: Task, reach: float) -> bool:
+        """The current plan ends at rest (below STALL_SPEED) more than `reach` m from the goal: the
+        robot is slowing down to stand in front of the obstacle (a creep from 0.16 m/s down to
+        STALL_SPEED took 3 s before the stall counted)."""
+        if self.plan_ is None:
+            return False
+        end = self.planned_states(state)[-1]
+        return abs(end[3]) < STALL_SPEED and np.hypot(*(np.asarray(task.goal, float) - end[:2])) > reach
 
     def act(self, state, t: float, task: Task, *, started: Optional[float] = None) -> np.ndarray:
         """The command to apply now at state (5,) and episode time t; `started`: the
