@@ -438,11 +438,11 @@ class RecedingHorizonController:
 
     def _unstalled(self, state, t: float, task: Task, command: np.ndarray) -> np.ndarray:
         """With unstall > 0: after `unstall` s standing or creeping (below STALL_SPEED), or
-        with stall_plans planning to (`_plans_to_stop`), away from the goal in front of a static obstacle (the
-        plan keeps the robot there: a local optimum; waiting for a moving obstacle to pass is
-        what a person who yields does - a blind detour then cuts in front of it), follow a
-        detour seed past the obstacle - on the side away from it, or the robot faces - for
-        ESCAPE_FACTOR x `unstall` s, then plan again."""
+        with stall_plans planning to (`_plans_to_stop`), away from the goal in front of a static
+        obstacle (the plan keeps the robot there: a local optimum; waiting for a moving obstacle
+        to pass is what a person who yields does - a blind detour then cuts in front of it),
+        follow a detour seed past the obstacle - on the side away from it, or the robot faces -
+        for ESCAPE_FACTOR x `unstall` s, then plan again."""
         if self._escape is not None:
             side, until = self._escape
             if t < until:
