@@ -295,7 +295,7 @@ def add_room(path):
     scenario = scenario_named(row["scenario"])
     folder, source = OUT / "learned", row["learned_on"]
     reward = load_reward(folder / f"{row['family']}__{source}.yaml")
-    starts = scenario.sample_starts(row["runs"], seed=row.get("test_seed", 4))
+    starts = scenario.sample_starts(row["runs"], seed=row.get("test_seed", 4))  # older rows: 4
     episodes, _ = drive_controller(reward, scenario, starts, f"room {row['family']}/{row['scenario']}",
                                    row["learn"]["driving"], None, 0.1)
     person = drive_person(row["family"], person_seed(row["family"], source, "test"), scenario, starts)

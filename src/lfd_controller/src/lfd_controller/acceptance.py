@@ -324,7 +324,7 @@ def calibrate(reward, demos: Sequence[Demonstration], make_controller: Callable,
             best = (score, candidate, report, stats, dict(scales))
         if progress is not None:
             progress(report)
-        if report.accepted and on_target(person, driven):
+        if report.accepted and on_target(person, driven, **tolerances):
             break
         history.append((math.log(scales["speed"]), math.log(max(driven["mean_speed"], 0.02))))
         scales = _next_scales(person, driven, matched, history, scales, bounds, moving)
@@ -349,9 +349,10 @@ def paced(demonstrated: Dict, driven: Dict, aim: float = AIM) -> bool:
             and driven["mean_speed"] >= (1.0 - aim) * demonstrated["mean_speed"])
 
 
-def on_target(demonstrated: Dict, driven: Dict, aim: float = AIM) -> bool:
-    """Where the calibration stops: `paced`, and the room and the goal as `compare` has them."""
-    matched = compare(demonstrated, driven)
+def on_target(demonstrated: Dict, driven: Dict, aim: float = AIM, **tolerances) -> bool:
+    """Where the calibration stops: `paced`, and the room and the goal as `compare` (with the
+    warnings' `tolerances`) has them."""
+    matched = compare(demonstrated, driven, **tolerances)
     return paced(demonstrated, driven, aim) and matched["closest"] and matched["reached"]
 
 
