@@ -101,6 +101,32 @@ def test_a_launch_set_stops_its_launches_and_deletes_their_parameters(roscore, t
     assert not graph.hasParam("/set_map_publisher/seed")
 
 
+@pytest.mark.ros
+def test_a_launch_set_forgets_the_registrations_of_a_node_killed_without_unregistering(
+        roscore, tmp_path):
+    from ros_harness.launching import refuses_connections
+
+    launches = LaunchSet(roscore, tmp_path)
+    node = launches.node("robot_sim", "map_publisher", name="killed_map_publisher")
+    node.wait_for_topics(["/map"], timeout=60)
+    graph = master_graph(roscore.uri)
+
+    def registered():
+        publishers, _, services = graph.getSystemState()
+        return ({topic for topic, nodes in publishers if "/killed_map_publisher" in nodes}
+                | {name for name, nodes in services if "/killed_map_publisher" in nodes})
+
+    uri = graph.lookupNode("/killed_map_publisher")
+    node.process.kill()     # SIGKILL: the node cannot unregister
+    # roslaunch runs its nodes in sessions of their own: the node is killed too, not orphaned
+    wait_until(lambda: refuses_connections(uri), 30, what="the killed node's API to close")
+    assert "/map" in registered()
+    launches.stop_all()
+    assert registered() == set()
+    # the master itself and its rosout stay registered
+    assert "/rosout" in {name for name, _ in graph.getSystemState()[0]}
+
+
 def test_a_missing_program_is_a_clear_error(tmp_path, monkeypatch):
     from ros_harness import PouchDBServer
 

@@ -19,7 +19,7 @@ import time
 import urllib.error
 import urllib.request
 from pathlib import Path
-from typing import Callable, Dict, List, Mapping, Optional, Sequence
+from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 from xml.sax.saxutils import quoteattr
 
 from robot_common.db_servers import couchdb_server_command, mongodb_server_command
@@ -151,32 +151,74 @@ class ManagedProcess:
             os.kill(self.popen.pid, signum)
 
     def stop(self, *, sig: int = signal.SIGINT, timeout: float = STOP_TIMEOUT) -> Optional[int]:
-        """Send `sig`, wait up to `timeout`, then SIGKILL the whole process group.
+        """Send `sig`, wait up to `timeout`, then SIGKILL whatever is left of the process tree.
 
         Returns the exit status (None if the process was never started).
         """
         if self.popen is None:
             return None
+        tree = _descendants(self.popen.pid)
         if self.popen.poll() is None:
             try:
                 os.kill(self.popen.pid, sig)
                 self.popen.wait(timeout=timeout)
             except (subprocess.TimeoutExpired, ProcessLookupError):
                 pass
-        self._kill_group()
+        self._kill_tree(tree)
         return self.popen.wait()
 
     def kill(self) -> None:
-        """SIGKILL the process and everything in its session, without any grace."""
+        """SIGKILL the process and every process it started, without any grace."""
         if self.popen is not None:
-            self._kill_group()
+            self._kill_tree(_descendants(self.popen.pid))
             self.popen.wait()
 
-    def _kill_group(self) -> None:
+    def _kill_tree(self, descendants: List[Tuple[int, int]]) -> None:
+        """SIGKILL the process's session and `descendants` ((pid, start time) pairs; a pid
+        whose start time changed is another process now). roslaunch starts each node in a
+        session of its own: killing roslaunch's session alone would leave its nodes running,
+        registered with the master, for the next test to meet."""
         try:
             os.killpg(self.popen.pid, signal.SIGKILL)
         except (ProcessLookupError, PermissionError):
             pass
+        for pid, started in descendants:
+            if _start_time(pid) == started:
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except (ProcessLookupError, PermissionError):
+                    pass
+
+
+def _start_time(pid: int) -> Optional[int]:
+    """The start time of process `pid` (clock ticks after boot, /proc/PID/stat), None if gone."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return int(stat[stat.rindex(")") + 2:].split()[19])
+
+
+def _descendants(pid: int) -> List[Tuple[int, int]]:
+    """(pid, start time) of every process below `pid` in the process tree, from /proc."""
+    children: Dict[int, List[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue
+        fields = stat[stat.rindex(")") + 2:].split()
+        children.setdefault(int(fields[1]), []).append(int(entry.name))
+    found, todo = [], list(children.get(pid, []))
+    while todo:
+        child = todo.pop()
+        started = _start_time(child)
+        if started is not None:
+            found.append((child, started))
+        todo.extend(children.get(child, []))
+    return found
 
 
 def master_graph(master_uri: str):
