@@ -6,9 +6,24 @@ import pytest
 from robot_common.cells import CellGrid
 from robot_sim import generate_building
 from ros_harness import wait_until
+from ros_harness.processes import master_graph
 from traffic_gp.sim.counting_check import check_counts
 
 pytestmark = pytest.mark.ros
+
+
+def what_the_counter_had(rospy, master_uri: str) -> str:
+    """The counter's own status and who publishes what it reads: the timeout's explanation."""
+    from std_srvs.srv import Trigger
+
+    try:
+        status = rospy.ServiceProxy("/people_counter/status", Trigger)().message
+    except Exception as err:  # noqa: BLE001 - the explanation must not hide the timeout
+        status = f"no status ({err})"
+    publishers, _, _ = master_graph(master_uri).getSystemState()
+    read = ("/map", "/scan", "/people", "/tf", "/tf_static", "/people_counts", "/clock")
+    return (f"status: {status}; /use_sim_time {rospy.get_param('/use_sim_time', 'unset')}; "
+            f"publishers: {[p for p in publishers if p[0] in read]}")
 
 
 def test_the_counter_counts_the_simulated_crowd_as_it_truly_was(roslaunch, rospy_node):
@@ -21,8 +36,11 @@ def test_the_counter_counts_the_simulated_crowd_as_it_truly_was(roslaunch, rospy
         # a busy Wednesday afternoon (peak density 1 person/m^2 in the main hall), 5 s watches
         roslaunch("robot_sim", "sim.launch", crowd=True, crowd_hour=62.0, peak_density=1.0)
         counter = roslaunch("traffic_gp", "people_counter.launch", watch=5.0, robot_id="robot_7")
-        wait_until(lambda: len(recorder.counts) >= 9, 300, what="9 watches of counts",
-                   check=counter.process.check_alive)
+        try:
+            wait_until(lambda: len(recorder.counts) >= 9, 300, what="9 watches of counts",
+                       check=counter.process.check_alive)
+        except TimeoutError as err:
+            raise AssertionError(f"{err}; {what_the_counter_had(rospy_node, counter.master_uri)}") from err
     finally:
         recorder.stop()
     status = rospy_node.ServiceProxy("/people_counter/status", Trigger)().message
