@@ -34,7 +34,7 @@ from typing import Dict, List, Optional, Sequence, Set, Tuple
 import numpy as np
 
 from robot_common.cells import DWELL_TIME_S, CellGrid
-from robot_common.maps import beam_indices, ray_disc_hits, raycast
+from robot_common.maps import beam_indices, beam_reach, ray_disc_hits, raycast
 from traffic_gp.errors import TrafficError
 
 __all__ = ["Detection", "Scan", "Watch", "PeopleCounter", "beam_ranges", "seen_points",
@@ -99,13 +99,11 @@ def beam_ranges(scan: Scan, vis_grid, people: Sequence[Detection], *, max_range:
     other beam sees its reading plus a person's radius (a person the tracker missed: their
     centre); so does a beam that reads farther than a tracked disc it crosses: it passed that
     spot (the tracked position is off by a few centimetres at the disc's edge, or a false
-    track). NaN and readings below range_min see nothing; +inf and readings above range_max (no
-    return) see to range_max."""
+    track). Readings are read by robot_common.maps.beam_reach (REP 117): an invalid one sees
+    nothing, no return sees to range_max."""
     x, y, yaw = scan.pose
-    measured = np.asarray(scan.ranges, dtype=float)
+    measured = beam_reach(scan.ranges, scan.range_min, scan.range_max)
     reach = min(max_range, scan.range_max)
-    measured = np.where(np.isnan(measured) | (measured < scan.range_min), 0.0, measured)
-    measured = np.where(measured > scan.range_max, reach, measured)
     world = yaw + np.asarray(scan.angles, dtype=float)
     near, far = ray_disc_hits(x, y, world, [(person.x, person.y) for person in people],
                               person_radius)
