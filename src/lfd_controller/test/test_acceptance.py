@@ -128,6 +128,8 @@ def test_calibration_goes_on_until_the_pace_is_close_not_only_within_the_warning
     # slowed to the last few per cent can stall)
     person, brisk = person_and_driven(0.32, 9.25, 0.367, 7.5)
     assert on_target(person, brisk)
+    # ... within the caller's tolerance for the warning, not compare's default
+    assert not on_target(person, brisk, speed_tolerance=0.1)
     assert _next_scales(person, close, compare(person, close), [(0.0, np.log(0.37))], SCALES,
                         (0.1, 0.5))["speed"] == 1.0
 
