@@ -21,7 +21,8 @@ For every family F left out, rotated over all families:
   * per row: success, collisions, median time to goal next to the person's own on the same
     starts, tuned behaviour cloning (same demos + DART drives) and, where the person reaches the
     goal in at least half the drives, the targets (success >= 90 %, 0 collisions, time <= 1.3 x
-    the person's median, >= cloning + 10 points where cloning < 90 %).
+    the person's median, >= cloning + 10 points where cloning < 90 %); below the table, for
+    each judged row, the controller's time over the person's from the same starts (not a target).
 
 Resumable: each row is written to artifacts/bench/lfd/{validation,rows}/ as soon as it is done
 and skipped when it exists; --families splits the work between processes; --phase table prints
@@ -41,8 +42,9 @@ import numpy as np  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 from lfd_controller.baseline import tune_behaviour_cloning  # noqa: E402
-from lfd_controller.features import Task  # noqa: E402
+from lfd_controller.features import ACCEL_MEMORY, ACCEL_SPAN, Task, observed_acceleration  # noqa: E402
 from lfd_controller.learning import fit_person_reward, load_reward, person_controller, save_reward  # noqa: E402
+from lfd_controller.params import RewardControllerParams  # noqa: E402
 from lfd_controller.plots import plot_trajectories  # noqa: E402
 from lfd_controller.sim import FAMILIES, dart_demos, make_person, person_demos, unseen_layouts  # noqa: E402
 from robot_sim.scenarios import load_scenario, run_episode  # noqa: E402
@@ -60,6 +62,11 @@ DEMOS, VALIDATION_STARTS = 10, 4
 BUDGETS = (0.1, None)   # the node's cycle budget (what users get), and none (load-independent)
 DEMO_POOL = 30      # starts the person drives from until DEMOS good takes (2 tries each)
 TEST_SEED, VALIDATION_SEED, DEMO_SEED = 4, 5, 3
+# How the controller knows the obstacle's future: "scenario" - the simulator's own time-indexed
+# obstacle, as reward_controller takes it in the simulator; "tracked" - its position and velocity
+# now, predicted at constant velocity, as the node does from the obstacle topic on a robot.
+PREDICTION = "scenario"
+OBSTACLE_ACCEL = RewardControllerParams.obstacle_accel     # the node's floor
 
 
 def scenario_named(name):
@@ -101,7 +108,8 @@ def drive_controller(reward, scenario, starts, desc, settings, cycles=None, budg
 
     def policy(state, t):
         started = time.process_time()
-        command = controller.act(state, t, task)
+        seen = task if PREDICTION == "scenario" else tracked_task(scenario, t)
+        command = controller.act(state, t, seen)
         used.append(time.process_time() - started)
         return command
     for start in tqdm(starts, desc=desc, leave=False, mininterval=5):
@@ -112,6 +120,17 @@ def drive_controller(reward, scenario, starts, desc, settings, cycles=None, budg
     if cycles is not None:
         cycles.extend(used)
     return episodes, results
+
+
+def tracked_task(scenario, t):
+    """The task as the node builds it from the obstacle topic (10 Hz): where the obstacle is at
+    `t` and its velocity then, kept constant, with the allowance for the hardest change of
+    velocity it showed lately."""
+    obstacle = scenario.obstacle
+    seen = np.arange(max(t - ACCEL_MEMORY - ACCEL_SPAN, 0.0), t + 1e-9, 0.1)    # the topic at 10 Hz
+    accel = max(OBSTACLE_ACCEL, observed_acceleration(seen, obstacle.velocity_at(seen)))
+    return Task.constant_velocity(scenario.goal, obstacle.position(t), obstacle.velocity_at(t), t,
+                                  obstacle.radius, accel)
 
 
 def drive_clone(clone, scenario, starts):
@@ -256,10 +275,11 @@ def test_row(family, name, choice, runs):
     failed = [{"success": False, "collided": False, "time": scenario.max_time}] * runs
     acceptance = info.get("acceptance") or {}
     refused = reward is not None and not acceptance.get("accepted", True)
+    person = drive_person(family, person_seed(family, source, "test"), scenario, starts)
     row = {"family": family, "scenario": name, "learned_on": source, "runs": runs,
            "demos": info["demos"], "learn": info, "refused": refused, "test_seed": TEST_SEED,
-           "person": summary(drive_person(family, person_seed(family, source, "test"), scenario, starts),
-                             scenario),
+           "prediction": PREDICTION,
+           "person": summary(person, scenario),
            "clone": summary(drive_clone(clone, scenario, starts) if reward is not None else failed,
                             scenario),
            "load_average": os.getloadavg()[0]}
@@ -273,6 +293,8 @@ def test_row(family, name, choice, runs):
                         cycle_ms={"count": len(cycles), "mean": 1000 * float(np.mean(cycles or [0.0])),
                                   "p95": 1000 * float(np.percentile(cycles or [0.0], 95)),
                                   "over_100": int(np.sum(np.array(cycles) > 0.1))})
+        if budget:
+            row["paired"] = paired_times(episodes, person)
         if results and budget:
             plot_trajectories(results, scenario, OUT / "plots" / f"{family}__{name}.png",
                               title=f"learned from {family} ({name}, 0.1 s budget)"
@@ -284,6 +306,19 @@ def test_row(family, name, choice, runs):
     write(path, row)
     print("  " + row_line(row), flush=True)
     return row
+
+
+def paired_times(controller, person):
+    """The controller's time over the person's from the same start, on the starts both reached
+    the goal from: their count, the median of the per-start ratios and the ratio of the totals
+    (a median of times compares different starts when the person's times fall in two groups,
+    e.g. slipping past an oscillating obstacle or waiting for it)."""
+    both = [(c["time"], p["time"]) for c, p in zip(controller, person) if c["success"] and p["success"]]
+    if not both:
+        return {"starts": 0, "median_ratio": float("nan"), "total_ratio": float("nan")}
+    mine, theirs = np.array(both).T
+    return {"starts": len(both), "median_ratio": float(np.median(mine / theirs)),
+            "total_ratio": float(mine.sum() / theirs.sum())}
 
 
 def add_room(path):
@@ -378,6 +413,12 @@ def table(rows):
                   f"median {room['closest_median']:.2f} m (the person on these starts: min "
                   f"{person['closest_min']:.2f}, median {person['closest_median']:.2f} m; "
                   f"in the demonstrations: min {shown if shown is None else round(shown, 2)} m)")
+    for r in judged:       # beside the medians: the same starts compared (not a target)
+        if "paired" in r and not r["refused"]:
+            paired = r["paired"]
+            print(f"paired time {r['family']}/{r['scenario']}: on the {paired['starts']} starts both "
+                  f"finished, per start a median {paired['median_ratio']:.2f}x the person's, in total "
+                  f"{paired['total_ratio']:.2f}x")
     families = sorted({r["family"] for r in rows})
     success = {f: [r["controller"]["success"] for r in rows if r["family"] == f] for f in families}
     worst = min(families, key=lambda f: (min(success[f]), np.mean(success[f])))
@@ -398,7 +439,7 @@ def table(rows):
 
 
 def main(argv=None) -> int:
-    global OUT, DEMOS, VALIDATION_STARTS, TEST_SEED
+    global OUT, DEMOS, VALIDATION_STARTS, TEST_SEED, PREDICTION
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--phase", choices=["validate", "test", "table", "all", "room"], default="all",
                         help="room: add the closest approach to rows written without it")
@@ -411,6 +452,10 @@ def main(argv=None) -> int:
     parser.add_argument("--test-seed", type=int, default=TEST_SEED,
                         help=f"the held-out starts' seed ({TEST_SEED}; another seed draws starts no "
                              "earlier run has seen)")
+    parser.add_argument("--prediction", choices=["scenario", "tracked"], default=PREDICTION,
+                        help="the controller's obstacle future: the simulator's (as the node in the "
+                             "simulator; default) or constant velocity from where it is now (as the "
+                             "node on a robot)")
     parser.add_argument("--out", type=Path, help="result folder (resumable; default artifacts/bench/lfd)")
     parser.add_argument("--choice", nargs=2, metavar=("LEARNER", "CLONE"),
                         help="skip the validation phase: the learner candidate and cloning setting "
@@ -419,7 +464,7 @@ def main(argv=None) -> int:
                         help="a smoke run: 4 demos, 2 validation starts (use with --out)")
     args = parser.parse_args(argv)
     OUT = args.out or OUT
-    TEST_SEED = args.test_seed
+    TEST_SEED, PREDICTION = args.test_seed, args.prediction
     if args.quick:
         DEMOS, VALIDATION_STARTS = 4, 2
     families = args.families or sorted(FAMILIES)

@@ -8,7 +8,7 @@ import pytest
 
 from lfd_controller.errors import LfdError
 from lfd_controller.expert import true_reward
-from lfd_controller.features import Task
+from lfd_controller.features import Task, observed_acceleration
 from lfd_controller.params import RewardControllerParams
 from lfd_controller.planner import CollisionBarrier, RecedingHorizonController
 from lfd_controller.ros_controller import RewardControllerNode
@@ -32,6 +32,45 @@ def test_without_sim_time_the_episode_time_is_wall_clock_since_enabled():
     np.testing.assert_allclose(task.obstacle_position(np.array(t)), [-1.0, 0.5 * (now - seen)], atol=1e-9)
     later, t_later = node.task_now()
     assert t_later >= t                            # monotonic: the warm start shifts forward
+    assert task.obstacle_spread is None             # nothing seen to change its velocity
+
+
+def test_the_obstacle_topic_s_prediction_allows_for_the_changes_of_velocity_it_showed():
+    config = RewardControllerParams.from_mapping({"reward_file": "r.yaml", "collision_margin": 0.1})
+    node = RewardControllerNode(true_reward(), config)
+    node.goal, now = np.array([0.0, 0.0]), time.monotonic()
+    node.clock_origin = now - 5.0
+    steady = [(now - 1.0 + 0.1 * k, np.array([0.0, 0.5])) for k in range(11)]
+    node.obstacle_track.extend(steady)
+    node.obstacle = (np.array([-1.0, 0.0]), np.array([0.0, 0.5]), now)
+    task, t = node.task_now()
+    assert task.obstacle_spread is None            # a steady walker: the prediction is exact
+    # slowing down from 0.5 to 0.25 m/s in the last half second: 0.5 m/s^2
+    node.obstacle_track.clear()
+    node.obstacle_track.extend(steady[:6] + [(now - 0.5 + 0.1 * k, np.array([0.0, 0.5 - 0.05 * k]))
+                                             for k in range(1, 6)])
+    task, t = node.task_now()
+    assert task.obstacle_spread(np.array([t + 1.0]))[0] == pytest.approx(0.25, abs=0.01)
+    # and at least ~obstacle_accel however steady it looked
+    config = RewardControllerParams.from_mapping({"reward_file": "r.yaml", "obstacle_accel": 1.0})
+    node = RewardControllerNode(true_reward(), config)
+    node.goal, node.clock_origin = np.array([0.0, 0.0]), now - 5.0
+    node.obstacle_track.extend(steady)
+    node.obstacle = (np.array([-1.0, 0.0]), np.array([0.0, 0.5]), now)
+    task, t = node.task_now()
+    assert task.obstacle_spread(np.array([t + 1.0]))[0] == pytest.approx(0.5, abs=0.01)
+
+
+def test_an_obstacle_s_hardest_recent_change_of_velocity_is_measured_over_half_a_second():
+    times = np.arange(0.0, 4.01, 0.1)
+    # steady, then turning from +x to +y at 1 m/s within 0.5 s (around t = 1), then steady
+    turned = times >= 1.0
+    velocities = np.where(turned[:, None], [0.0, 1.0], [1.0, 0.0])
+    assert observed_acceleration(times[:10], velocities[:10]) == 0.0
+    assert observed_acceleration(times[:16], velocities[:16]) == pytest.approx(np.sqrt(2) / 0.5)
+    # more than ACCEL_MEMORY s later it is forgotten
+    assert observed_acceleration(times, velocities) == 0.0
+    assert observed_acceleration([1.0], [[0.0, 1.0]]) == 0.0
 
 
 def test_the_warm_start_is_the_previous_plan_shifted_by_elapsed_time():
@@ -55,3 +94,20 @@ def test_the_barrier_penalises_only_inside_the_margin_and_points_away():
         barrier.derivatives(states, np.zeros((3, 2)), np.zeros(3), task, order=2)
     with pytest.raises(LfdError, match="cycle budget"):
         RecedingHorizonController(zero, Unicycle(0.1), budget=0.0)
+
+
+def test_a_predicted_obstacle_s_barrier_widens_with_the_time_ahead_for_its_possible_error():
+    zero = true_reward(0.0)
+    barrier = CollisionBarrier(zero, 0.43, margin=0.1, scale=100.0)
+    # still at (1, 0) seen at t = 2; it may speed up at 0.5 m/s^2
+    exact = Task.constant_velocity(np.zeros(2), [1.0, 0.0], [0.0, 0.0], 2.0)
+    unsure = Task.constant_velocity(np.zeros(2), [1.0, 0.0], [0.0, 0.0], 2.0, accel=0.5)
+    states = np.tile([1.0 - 0.6, 0, 0, 0, 0], (4, 1))        # 0.6 m from it: outside 0.53 m
+    times = np.array([2.0, 2.6, 3.0, 4.0])
+    assert np.all(barrier.derivatives(states, np.zeros((4, 2)), times, exact, order=1).value == 0.0)
+    value = barrier.derivatives(states, np.zeros((4, 2)), times, unsure, order=1).value
+    assert value[0] == 0.0                                   # now: where it was seen
+    # 0.6 s ahead it may be 0.09 m off: the robot is 0.02 m into the widened margin
+    assert value[1] == pytest.approx(-100.0 * (0.02 / 0.1) ** 2)
+    # the allowance stops growing after a second (0.25 m): planned again before then
+    assert value[2] == pytest.approx(value[3]) and value[2] == pytest.approx(-100.0 * 1.8 ** 2)

@@ -55,6 +55,32 @@ def as_trajectory(states, actions, times):
     return states, actions, times
 
 
+# seconds ahead over which a constant-velocity prediction's allowance for error grows
+PREDICTION_TRUST = 1.0
+# how far back (s) an obstacle's changes of velocity are remembered, and over what span (s) each
+# is measured (a shorter span measures noise)
+ACCEL_MEMORY, ACCEL_SPAN = 2.0, 0.5
+
+
+def observed_acceleration(times, velocities) -> float:
+    """The hardest change of velocity (m/s^2) an obstacle showed in the last ACCEL_MEMORY s:
+    times (N,) in increasing order, velocities (N, 2) as tracked then; each change measured
+    over about ACCEL_SPAN s. 0 with less than ACCEL_SPAN s of history."""
+    times = np.asarray(times, float)
+    velocities = np.asarray(velocities, float).reshape(-1, 2)
+    if len(times) < 2:
+        return 0.0
+    keep = times >= times[-1] - ACCEL_MEMORY
+    times, velocities = times[keep], velocities[keep]
+    before = np.searchsorted(times, times - ACCEL_SPAN, side="right") - 1
+    valid = before >= 0
+    if not np.any(valid):
+        return 0.0
+    span = times[valid] - times[before[valid]]
+    change = np.linalg.norm(velocities[valid] - velocities[before[valid]], axis=1)
+    return float(np.max(change / np.maximum(span, 1e-6)))
+
+
 def proximity_name(width: float) -> str:
     """Name of the extra proximity feature of fall-off length `width` (m)."""
     return f"obstacle_proximity_{width:g}"
@@ -67,6 +93,9 @@ class Task:
     goal: np.ndarray
     obstacle_position: Callable[[np.ndarray], np.ndarray]
     obstacle_radius: float = 0.25
+    # how far the obstacle may be from obstacle_position at episode times t (m): a prediction's
+    # allowance for error (None: the positions are known)
+    obstacle_spread: Optional[Callable[[np.ndarray], np.ndarray]] = None
 
     @classmethod
     def from_scenario(cls, scenario) -> "Task":
@@ -75,13 +104,20 @@ class Task:
 
     @classmethod
     def constant_velocity(cls, goal, position, velocity, now: float,
-                          radius: float = 0.25) -> "Task":
-        """An obstacle seen at `position` moving at `velocity` at episode time `now`."""
+                          radius: float = 0.25, accel: float = 0.0) -> "Task":
+        """An obstacle seen at `position` moving at `velocity` at episode time `now`. accel > 0
+        (m/s^2): it may speed up, slow down or turn that hard, so it may be up to accel x s^2 / 2
+        from the prediction s seconds ahead - for the first PREDICTION_TRUST s; later parts of a
+        plan are planned again before the robot gets there."""
         position, velocity = np.asarray(position, float), np.asarray(velocity, float)
 
         def predict(t):
             return position + (np.asarray(t, float)[..., None] - now) * velocity
-        return cls(np.asarray(goal, float), predict, radius)
+
+        def spread(t):
+            ahead = np.clip(np.asarray(t, float) - now, 0.0, PREDICTION_TRUST)
+            return 0.5 * accel * ahead ** 2
+        return cls(np.asarray(goal, float), predict, radius, spread if accel > 0 else None)
 
 
 @dataclass

@@ -101,6 +101,10 @@ class RewardControllerParams(NodeConfig):
                                 "(person rewards: 1.5); 0: off")
     stall_plans: bool = param(False, "with ~unstall: a plan that ends standing away from the goal "
                                      "counts as standing still (person rewards: true)")
+    obstacle_accel: float = param(0.0, "the obstacle topic is predicted at constant velocity, "
+                                       "allowing for a change of velocity as hard as the "
+                                       "hardest it showed in the last 2 s, and at least this "
+                                       "hard (m/s^2)")
     frame: str = param("odom", "frame of the published plan")
     enabled: bool = param(True, "drive from the start (service ~enable switches)")
     lookahead: float = param(4.0, "path mode (a hallway reward): the local waypoint this far (m) "
@@ -149,6 +153,8 @@ class RewardControllerParams(NodeConfig):
             raise ConfigError(f"~detour must be >= 0, got {self.detour!r}")
         if self.collision_margin < 0:
             raise ConfigError(f"~collision_margin must be >= 0, got {self.collision_margin!r}")
+        if self.obstacle_accel < 0:
+            raise ConfigError(f"~obstacle_accel must be >= 0, got {self.obstacle_accel!r}")
         if not 0.0 < self.discount <= 1.0:
             raise ConfigError(f"~discount must be in (0, 1], got {self.discount!r}")
         if self.min_horizon != 0 and not 2 <= self.min_horizon <= self.horizon:

@@ -1,6 +1,7 @@
 """RewardControllerNode: drives with a learned reward by receding-horizon optimisation."""
 import threading
 import time
+from collections import deque
 
 import numpy as np
 import rospy
@@ -11,7 +12,7 @@ from std_msgs.msg import Float64, String
 from std_srvs.srv import SetBool, SetBoolResponse
 from threadpoolctl import threadpool_limits
 
-from lfd_controller.features import Task
+from lfd_controller.features import ACCEL_MEMORY, ACCEL_SPAN, Task, observed_acceleration
 from lfd_controller.hallway_features import HallwayFeatures
 from lfd_controller.learning import controller_settings, load_reward
 from lfd_controller.params import RewardControllerParams
@@ -38,7 +39,9 @@ class RewardControllerNode:
       ~detour (double, 0: > 0 adds planner.detour_seeds this far beside the obstacle),
       ~frame (str, "odom"), ~enabled (bool, true).
     Topics in: odom (nav_msgs/Odometry), goal (geometry_msgs/PoseStamped), obstacle
-      (nav_msgs/Odometry: position and velocity; predicted at constant velocity), scenario
+      (nav_msgs/Odometry: position and velocity; predicted at constant velocity, the barrier
+      widened for a change of velocity as hard as the hardest in its last 2 s, at least
+      ~obstacle_accel), scenario
       (std_msgs/String; optional: time-indexed obstacle and limits from the simulator's scenario),
       sim_time (sensor_msgs/TimeReference; optional: episode time for the scenario's obstacle).
       Without sim_time the episode time is wall-clock (monotonic) seconds since driving was
@@ -63,6 +66,7 @@ class RewardControllerNode:
                                                     Unicycle(0.1, config.limits()), **self.options)
         self.clock_origin = time.monotonic()     # wall-clock episode time without sim_time
         self.state = self.goal = self.obstacle = self.scenario = self.episode_time = None
+        self.obstacle_track = deque()      # (monotonic time, velocity) of the obstacle topic
         self.cmd = self.plan = self.cycle = self.timer = None
 
     def planned_reward(self, clearance: float):
@@ -95,9 +99,13 @@ class RewardControllerNode:
 
     def on_obstacle(self, msg):
         twist = msg.twist.twist
+        now = time.monotonic()
         with self.lock:
             self.obstacle = (np.array([msg.pose.pose.position.x, msg.pose.pose.position.y]),
-                             np.array([twist.linear.x, twist.linear.y]), time.monotonic())
+                             np.array([twist.linear.x, twist.linear.y]), now)
+            self.obstacle_track.append((now, self.obstacle[1]))
+            while self.obstacle_track[0][0] < now - ACCEL_MEMORY - ACCEL_SPAN:
+                self.obstacle_track.popleft()
 
     def on_scenario(self, msg):
         try:
@@ -135,8 +143,12 @@ class RewardControllerNode:
         if self.goal is None or self.obstacle is None:
             return None, t
         position, velocity, seen = self.obstacle
+        accel = self.config.obstacle_accel
+        if self.obstacle_track:
+            times, velocities = zip(*self.obstacle_track)
+            accel = max(accel, observed_acceleration(times, velocities))
         return Task.constant_velocity(self.goal, position + velocity * (now - seen), velocity, t,
-                                      self.obstacle_radius), t
+                                      self.obstacle_radius, accel), t
 
     def tick(self, _event):
         with self.lock:
