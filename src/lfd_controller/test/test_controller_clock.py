@@ -61,6 +61,34 @@ def test_the_obstacle_topic_s_prediction_allows_for_the_changes_of_velocity_it_s
     assert task.obstacle_spread(np.array([t + 1.0]))[0] == pytest.approx(0.5, abs=0.01)
 
 
+def test_the_obstacle_topic_is_remembered_for_its_changes_of_velocity_and_then_forgotten(
+        monkeypatch):
+    from nav_msgs.msg import Odometry
+
+    from lfd_controller import ros_controller
+
+    clock = [100.0]
+    monkeypatch.setattr(ros_controller.time, "monotonic", lambda: clock[0])
+    config = RewardControllerParams.from_mapping({"reward_file": "r.yaml", "collision_margin": 0.1})
+    node = RewardControllerNode(true_reward(), config)
+    node.goal, node.clock_origin = np.array([0.0, 0.0]), 90.0
+
+    def seen(vy):
+        msg = Odometry()
+        msg.pose.pose.position.x, msg.twist.twist.linear.y = -1.0, vy
+        node.on_obstacle(msg)
+        clock[0] += 0.1
+    for k in range(10):             # slowing from 0.5 to 0 m/s in a second: 0.5 m/s^2
+        seen(0.5 - 0.05 * k)
+    task, t = node.task_now()
+    assert task.obstacle_spread(np.array([t + 1.0]))[0] == pytest.approx(0.25, abs=0.03)
+    for _ in range(30):             # then standing for 3 s: the slowing is forgotten
+        seen(0.0)
+    assert node.obstacle_track[-1][0] - node.obstacle_track[0][0] <= 2.5 + 1e-9
+    task, t = node.task_now()
+    assert task.obstacle_spread is None
+
+
 def test_an_obstacle_s_hardest_recent_change_of_velocity_is_measured_over_half_a_second():
     times = np.arange(0.0, 4.01, 0.1)
     # steady, then turning from +x to +y at 1 m/s within 0.5 s (around t = 1), then steady
