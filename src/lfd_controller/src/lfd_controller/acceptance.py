@@ -341,11 +341,11 @@ def calibrate(reward, demos: Sequence[Demonstration], make_controller: Callable,
     return candidate, report
 
 
-def paced(demonstrated: Dict, driven: Dict, aim: float = AIM, *,
-          speed_tolerance: float = 0.2) -> bool:
+def paced(demonstrated: Dict, driven: Dict, aim: float = AIM, **tolerances) -> bool:
     """The calibration's aim for the pace: mean speed no more than `aim` below the person's (and
-    within the warning's `speed_tolerance` above it), time to goal at most `aim` longer."""
-    matched = compare(demonstrated, driven, time_tolerance=aim, speed_tolerance=speed_tolerance)
+    within the warning's speed tolerance above it: `compare`'s, or the caller's), time to goal at
+    most `aim` longer."""
+    matched = compare(demonstrated, driven, **dict(tolerances, time_tolerance=aim))
     return (matched["mean_speed"] and matched["time"]
             and driven["mean_speed"] >= (1.0 - aim) * demonstrated["mean_speed"])
 
@@ -354,8 +354,7 @@ def on_target(demonstrated: Dict, driven: Dict, aim: float = AIM, **tolerances) 
     """Where the calibration stops: `paced`, and the room and the goal as `compare` (with the
     warnings' `tolerances`) has them."""
     matched = compare(demonstrated, driven, **tolerances)
-    speed = {k: v for k, v in tolerances.items() if k == "speed_tolerance"}
-    return paced(demonstrated, driven, aim, **speed) and matched["closest"] and matched["reached"]
+    return paced(demonstrated, driven, aim, **tolerances) and matched["closest"] and matched["reached"]
 
 
 def _mismatch(demonstrated: Dict, driven: Dict) -> float:

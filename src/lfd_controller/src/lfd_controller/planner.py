@@ -227,9 +227,9 @@ class CollisionBarrier:
                                             float).reshape(-1, 2)
         distance = np.maximum(np.linalg.norm(offset, axis=1), 1e-9)
         clearance = self.clearance
-        spread = getattr(task, "obstacle_spread", None)
-        if spread is not None:      # the prediction may be off by this much
-            clearance = clearance + np.asarray(spread(np.asarray(times, float)), float).reshape(-1)
+        if task.obstacle_spread is not None:    # the prediction may be off by this much
+            clearance = clearance + np.asarray(task.obstacle_spread(np.asarray(times, float)),
+                                               float).reshape(-1)
         depth = np.maximum(clearance + self.margin - distance, 0.0) / self.margin
         rd.value = rd.value - self.scale * depth ** 2
         if order >= 1:
