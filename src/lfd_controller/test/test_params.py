@@ -38,7 +38,7 @@ def test_controller_config_builds_the_limits_and_the_planner_options():
     assert config.controller_options() == {"horizon": 20, "plan_dt": 0.2, "terminal": 10.0,
                                            "max_iter": 15, "detour": 0.0, "spread_seeds": False,
                                            "discount": 1.0, "min_horizon": 0, "arrival": 0.0, "unstall": 0.0,
-                                           "stall_plans": False}
+                                           "stall_plans": False, "goal_seed": 0.0}
     with pytest.raises(ConfigError, match="rate"):
         RewardControllerParams.from_mapping({"rate": 0.0})
     with pytest.raises(ModelError, match="w_max"):
@@ -80,7 +80,8 @@ def test_a_person_reward_carries_the_controller_settings_it_is_driven_with(tmp_p
     # the person driving settings documented in src/lfd_controller/README.md
     assert (driven.horizon, driven.plan_dt, driven.terminal, driven.detour, driven.spread_seeds,
             driven.discount, driven.min_horizon, driven.arrival, driven.unstall, driven.stall_plans,
-            driven.collision_margin) == (20, 0.4, 0.0, 0.8, True, 0.97, 8, 0.25, 1.5, True, 0.1)
+            driven.goal_seed, driven.collision_margin) == (20, 0.4, 0.0, 0.8, True, 0.97, 8, 0.25,
+                                                           1.5, True, 1.0, 0.1)
     assert driven.rate == config.rate and driven.max_iter == config.max_iter
     assert controller_settings(linear) == {}
     assert config.with_reward_settings(controller_settings(linear)) == config
@@ -92,6 +93,8 @@ def test_a_person_reward_carries_the_controller_settings_it_is_driven_with(tmp_p
         config.with_reward_settings({"detour": -1.0})
     with pytest.raises(ConfigError, match="discount"):
         config.with_reward_settings({"discount": 1.5})
+    with pytest.raises(ConfigError, match="goal_seed"):
+        config.with_reward_settings({"goal_seed": 2.0})
     with pytest.raises(ConfigError, match="min_horizon"):
         config.with_reward_settings({"min_horizon": 21})     # above ~horizon (20)
     with pytest.raises(ConfigError, match="min_horizon"):

@@ -101,6 +101,9 @@ class RewardControllerParams(NodeConfig):
                                 "(person rewards: 1.5); 0: off")
     stall_plans: bool = param(False, "with ~unstall: a plan that ends standing away from the goal "
                                      "counts as standing still (person rewards: true)")
+    goal_seed: float = param(0.0, "> 0: also try a plan that drives straight at the goal at this "
+                                  "fraction of ~v_max (the others start along the robot's "
+                                  "heading; person rewards: 1.0); 0: none")
     obstacle_accel: float = param(0.0, "the obstacle topic is predicted at constant velocity, "
                                        "allowing for a change of velocity as hard as the "
                                        "hardest it showed in the last 2 s, and at least this "
@@ -138,12 +141,13 @@ class RewardControllerParams(NodeConfig):
                                         "(learn_reward --kind person saves horizon, plan_dt, "
                                         "terminal, detour, spread_seeds, discount, "
                                         "min_horizon, arrival, unstall, stall_plans, "
-                                        "collision_margin; "
+                                        "goal_seed, collision_margin; "
                                         "sim.teach_hallway saves barrier_margin) instead of "
                                         "these")
 
     SAVED_SETTINGS = ("horizon", "plan_dt", "terminal", "detour", "spread_seeds", "discount",
-                      "min_horizon", "arrival", "unstall", "stall_plans", "collision_margin",
+                      "min_horizon", "arrival", "unstall", "stall_plans", "goal_seed",
+                      "collision_margin",
                       "barrier_margin")
 
     def check(self) -> None:
@@ -155,6 +159,8 @@ class RewardControllerParams(NodeConfig):
             raise ConfigError(f"~collision_margin must be >= 0, got {self.collision_margin!r}")
         if self.obstacle_accel < 0:
             raise ConfigError(f"~obstacle_accel must be >= 0, got {self.obstacle_accel!r}")
+        if not 0.0 <= self.goal_seed <= 1.0:
+            raise ConfigError(f"~goal_seed must be in [0, 1] (0: none), got {self.goal_seed!r}")
         if not 0.0 < self.discount <= 1.0:
             raise ConfigError(f"~discount must be in (0, 1], got {self.discount!r}")
         if self.min_horizon != 0 and not 2 <= self.min_horizon <= self.horizon:
@@ -210,7 +216,7 @@ class RewardControllerParams(NodeConfig):
                 "max_iter": self.max_iter, "detour": self.detour,
                 "spread_seeds": self.spread_seeds, "discount": self.discount,
                 "min_horizon": self.min_horizon, "arrival": self.arrival, "unstall": self.unstall,
-                "stall_plans": self.stall_plans}
+                "stall_plans": self.stall_plans, "goal_seed": self.goal_seed}
 
 
 @dataclass

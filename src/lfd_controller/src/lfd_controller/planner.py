@@ -154,6 +154,21 @@ def seed_commands(model, count: int, turns: Sequence[float] = (0.0, 0.8, -0.8, 1
             for turn in turns]
 
 
+def _pursuit(model, count: int, state, t0: float, aim, speed: float) -> np.ndarray:
+    """Commands (count, 2) of pure pursuit at `speed` x v_max of the point aim(x, t) (slower the
+    further it is off the heading, turning at twice the heading error within w_max)."""
+    x, actions = np.asarray(state, float).copy(), []
+    for k in range(count):
+        point = aim(x, t0 + k * model.dt)
+        error = np.arctan2(point[1] - x[1], point[0] - x[0]) - x[2]
+        error = np.arctan2(np.sin(error), np.cos(error))
+        command = np.array([speed * model.limits.v_max * max(np.cos(error), 0.0),
+                            np.clip(2.0 * error, -model.limits.w_max, model.limits.w_max)])
+        actions.append(command)
+        x = model.step(x, command)
+    return np.array(actions)
+
+
 def detour_seeds(model, count: int, state, t0: float, task: Task, offset: float,
                  speed: float = 0.5) -> list:
     """Initial guesses that pass the obstacle on either side: pure pursuit, at `speed` x v_max,
@@ -161,28 +176,30 @@ def detour_seeds(model, count: int, state, t0: float, task: Task, offset: float,
     obstacle is when the robot gets there), then of the goal. A local optimiser started from
     straight or turning guesses stops in front of an obstacle that blocks the goal; these give it
     both ways around (the reward still decides)."""
-    state = np.asarray(state, float)
     goal = np.asarray(task.goal, float)
     seeds = []
     for side in (1.0, -1.0):
-        x, actions, passed = state.copy(), [], False
-        for k in range(count):
-            t = t0 + k * model.dt
+        passed = [False]
+
+        def aim(x, t, side=side, passed=passed):
             obstacle = np.asarray(task.obstacle_position(np.array(t)), float).reshape(2)
             to_goal = goal - x[:2]
             normal = np.array([-to_goal[1], to_goal[0]]) / max(np.linalg.norm(to_goal), 1e-9)
             waypoint = obstacle + side * offset * normal
-            passed = passed or np.dot(waypoint - x[:2], to_goal) < 0.0 or \
+            passed[0] = passed[0] or np.dot(waypoint - x[:2], to_goal) < 0.0 or \
                 np.linalg.norm(waypoint - x[:2]) < 0.2
-            aim = goal if passed else waypoint
-            error = np.arctan2(aim[1] - x[1], aim[0] - x[0]) - x[2]
-            error = np.arctan2(np.sin(error), np.cos(error))
-            command = np.array([speed * model.limits.v_max * max(np.cos(error), 0.0),
-                                np.clip(2.0 * error, -model.limits.w_max, model.limits.w_max)])
-            actions.append(command)
-            x = model.step(x, command)
-        seeds.append(np.array(actions))
+            return goal if passed[0] else waypoint
+        seeds.append(_pursuit(model, count, state, t0, aim, speed))
     return seeds
+
+
+def goal_seed(model, count: int, state, t0: float, task: Task, speed: float) -> np.ndarray:
+    """An initial guess that drives straight at the goal: pure pursuit of it at `speed` x v_max.
+    The straight and turning guesses start along the robot's heading, and from a start facing
+    away from the goal they settle behind a moving obstacle; heading for the goal at once is what
+    a person who slips past it in front does (the reward still decides)."""
+    goal = np.asarray(task.goal, float)
+    return _pursuit(model, count, state, t0, lambda x, t: goal, speed)
 
 
 def plan_from_seeds(reward, model, task: Task, start, t0: float, count: int, *, max_iter: int = 200,
@@ -353,7 +370,8 @@ class RecedingHorizonController:
         again (`escapes_` counts them): a person who wants the goal does not wait in front of a
         static obstacle until the time runs out, and the plan's local optimum there is stable;
         stall_plans: a plan that ends standing away from the goal counts as standing (the robot
-        is slowing down to stand there: `_plans_to_stop`).
+        is slowing down to stand there: `_plans_to_stop`); goal_seed > 0 adds a seed driving
+        straight at the goal at this fraction of v_max (`goal_seed`; 0: none).
     """
 
     def __init__(self, reward, model, *, horizon: int = 20, plan_dt: Optional[float] = 0.2,
@@ -361,7 +379,7 @@ class RecedingHorizonController:
                  seed_turns: Sequence[float] = (0.0, 1.2, -1.2), budget: Optional[float] = None,
                  detour: float = 0.0, spread_seeds: bool = False, discount: float = 1.0,
                  min_horizon: int = 0, arrival: float = 0.0, unstall: float = 0.0,
-                 stall_plans: bool = False):
+                 stall_plans: bool = False, goal_seed: float = 0.0):
         if horizon < 2:
             raise LfdError(f"the planning horizon must be at least 2 steps, got {horizon}")
         if plan_dt is not None and not plan_dt > 0:
@@ -391,6 +409,9 @@ class RecedingHorizonController:
             raise LfdError(f"unstall must be >= 0 s (0: off) and needs detour > 0, got {unstall!r}")
         self.unstall = float(unstall)
         self.stall_plans = bool(stall_plans)
+        if not 0.0 <= goal_seed <= 1.0:
+            raise LfdError(f"goal_seed is a fraction of v_max in [0, 1] (0: none), got {goal_seed!r}")
+        self.goal_seed = float(goal_seed)
         if self.arrival > 0:
             self.reward = ArrivalReward(reward, self.arrival, time_cost=arrival_time_cost(
                 reward, self.model.limits.v_max))
@@ -429,15 +450,18 @@ class RecedingHorizonController:
 
     def _seeds(self, state, t: float, task: Task, which: Optional[int]) -> list:
         """The alternative initial guesses (all of them, or only the one numbered `which`)."""
-        count = len(self.seed_turns) + (2 if self.detour > 0 else 0)
+        detours = 2 if self.detour > 0 else 0
+        count = len(self.seed_turns) + detours + (1 if self.goal_seed > 0 else 0)
         chosen = range(count) if which is None else [which % count]
         seeds = []
         for k in chosen:
             if k < len(self.seed_turns):
                 seeds += seed_commands(self.model, self.steps_, (self.seed_turns[k],))
-            else:
+            elif k < len(self.seed_turns) + detours:
                 side = k - len(self.seed_turns)
                 seeds.append(detour_seeds(self.model, self.steps_, state, t, task, self.detour)[side])
+            else:
+                seeds.append(goal_seed(self.model, self.steps_, state, t, task, self.goal_seed))
         return seeds
 
     def _unstalled(self, state, t: float, task: Task, command: np.ndarray) -> np.ndarray:
