@@ -169,28 +169,33 @@ def _pursuit(model, count: int, state, t0: float, aim, speed: float) -> np.ndarr
     return np.array(actions)
 
 
-def detour_seeds(model, count: int, state, t0: float, task: Task, offset: float,
-                 speed: float = 0.5) -> list:
-    """Initial guesses that pass the obstacle on either side: pure pursuit, at `speed` x v_max,
-    of a waypoint `offset` m beside the obstacle (across the line to the goal, where the
-    obstacle is when the robot gets there), then of the goal. A local optimiser started from
-    straight or turning guesses stops in front of an obstacle that blocks the goal; these give it
-    both ways around (the reward still decides)."""
+def _detour_aim(task: Task, offset: float, side: float):
+    """aim(x, t) of a detour seed: the waypoint `offset` m on `side` of the obstacle (across the
+    line to the goal) until the robot has passed it, then the goal."""
     goal = np.asarray(task.goal, float)
-    seeds = []
-    for side in (1.0, -1.0):
-        passed = [False]
+    passed = False
 
-        def aim(x, t, side=side, passed=passed):
-            obstacle = np.asarray(task.obstacle_position(np.array(t)), float).reshape(2)
-            to_goal = goal - x[:2]
-            normal = np.array([-to_goal[1], to_goal[0]]) / max(np.linalg.norm(to_goal), 1e-9)
-            waypoint = obstacle + side * offset * normal
-            passed[0] = passed[0] or np.dot(waypoint - x[:2], to_goal) < 0.0 or \
-                np.linalg.norm(waypoint - x[:2]) < 0.2
-            return goal if passed[0] else waypoint
-        seeds.append(_pursuit(model, count, state, t0, aim, speed))
-    return seeds
+    def aim(x, t):
+        nonlocal passed
+        obstacle = np.asarray(task.obstacle_position(np.array(t)), float).reshape(2)
+        to_goal = goal - x[:2]
+        normal = np.array([-to_goal[1], to_goal[0]]) / max(np.linalg.norm(to_goal), 1e-9)
+        waypoint = obstacle + side * offset * normal
+        passed = passed or np.dot(waypoint - x[:2], to_goal) < 0.0 or \
+            np.linalg.norm(waypoint - x[:2]) < 0.2
+        return goal if passed else waypoint
+    return aim
+
+
+def detour_seeds(model, count: int, state, t0: float, task: Task, offset: float,
+                 speed: float = 0.5, sides: Sequence[float] = (1.0, -1.0)) -> list:
+    """Initial guesses that pass the obstacle on either side (each of `sides`, +1 left of the way
+    to the goal, -1 right): pure pursuit, at `speed` x v_max, of a waypoint `offset` m beside the
+    obstacle (across the line to the goal, where the obstacle is when the robot gets there), then
+    of the goal. A local optimiser started from straight or turning guesses stops in front of an
+    obstacle that blocks the goal; these give it both ways around (the reward still decides)."""
+    return [_pursuit(model, count, state, t0, _detour_aim(task, offset, side), speed)
+            for side in sides]
 
 
 def goal_seed(model, count: int, state, t0: float, task: Task, speed: float) -> np.ndarray:
@@ -458,8 +463,9 @@ class RecedingHorizonController:
             if k < len(self.seed_turns):
                 seeds += seed_commands(self.model, self.steps_, (self.seed_turns[k],))
             elif k < len(self.seed_turns) + detours:
-                side = k - len(self.seed_turns)
-                seeds.append(detour_seeds(self.model, self.steps_, state, t, task, self.detour)[side])
+                side = (1.0, -1.0)[k - len(self.seed_turns)]
+                seeds += detour_seeds(self.model, self.steps_, state, t, task, self.detour,
+                                      sides=(side,))
             else:
                 seeds.append(goal_seed(self.model, self.steps_, state, t, task, self.goal_seed))
         return seeds
@@ -474,7 +480,8 @@ class RecedingHorizonController:
         if self._escape is not None:
             side, until = self._escape
             if t < until:
-                seed = detour_seeds(self.model, 2, state, t, task, self.detour)[0 if side > 0 else 1]
+                (seed,) = detour_seeds(self.model, 2, state, t, task, self.detour,
+                                       sides=(1.0 if side > 0 else -1.0,))
                 return seed[0]
             self._escape, self._still_since = None, None
         reach = max(self.arrival, 0.25) * 1.5
