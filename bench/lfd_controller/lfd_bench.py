@@ -42,7 +42,7 @@ import numpy as np  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 from lfd_controller.baseline import tune_behaviour_cloning  # noqa: E402
-from lfd_controller.features import ACCEL_MEMORY, ACCEL_SPAN, Task, observed_acceleration  # noqa: E402
+from lfd_controller.features import Task  # noqa: E402
 from lfd_controller.learning import fit_person_reward, load_reward, person_controller, save_reward  # noqa: E402
 from lfd_controller.params import RewardControllerParams  # noqa: E402
 from lfd_controller.plots import plot_trajectories  # noqa: E402
@@ -108,7 +108,7 @@ def drive_controller(reward, scenario, starts, desc, settings, cycles=None, budg
 
     def policy(state, t):
         started = time.process_time()
-        seen = task if PREDICTION == "scenario" else tracked_task(scenario, t)
+        seen = task if PREDICTION == "scenario" else Task.tracked(scenario, t, accel=OBSTACLE_ACCEL)
         command = controller.act(state, t, seen)
         used.append(time.process_time() - started)
         return command
@@ -120,17 +120,6 @@ def drive_controller(reward, scenario, starts, desc, settings, cycles=None, budg
     if cycles is not None:
         cycles.extend(used)
     return episodes, results
-
-
-def tracked_task(scenario, t):
-    """The task as the node builds it from the obstacle topic (10 Hz): where the obstacle is at
-    `t` and its velocity then, kept constant, with the allowance for the hardest change of
-    velocity it showed lately."""
-    obstacle = scenario.obstacle
-    seen = np.arange(max(t - ACCEL_MEMORY - ACCEL_SPAN, 0.0), t + 1e-9, 0.1)    # the topic at 10 Hz
-    accel = max(OBSTACLE_ACCEL, observed_acceleration(seen, obstacle.velocity_at(seen)))
-    return Task.constant_velocity(scenario.goal, obstacle.position(t), obstacle.velocity_at(t), t,
-                                  obstacle.radius, accel)
 
 
 def drive_clone(clone, scenario, starts):

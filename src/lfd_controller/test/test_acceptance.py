@@ -17,12 +17,14 @@ from lfd_controller.acceptance import (
     _next_scales,
     calibrate,
     compare,
+    drive,
     nearby_starts,
     on_target,
     scaled,
     trajectory_statistics,
     verdict,
 )
+from lfd_controller.errors import LearningError
 from lfd_controller.learning import (
     RewardNotAcceptedError,
     learn_and_save,
@@ -207,6 +209,37 @@ def test_a_controller_that_cuts_closer_to_a_moving_obstacle_than_the_person_is_n
     assert report.failures["room"] and not report.accepted
     error = RewardNotAcceptedError(report)
     assert "NOT saved" in str(error) and "from the moving obstacle where the person kept" in str(error)
+
+
+class ObstacleProbe:
+    """A controller that stands still and notes where it is told the obstacle will be 1 s ahead."""
+
+    def __init__(self):
+        self.seen = []
+
+    def reset(self):
+        pass
+
+    def act(self, state, t, task):
+        self.seen.append(task.obstacle_position(np.array([t + 1.0]))[0])
+        return np.zeros(2)
+
+
+def test_a_checked_controller_knows_the_obstacle_as_the_scenario_has_it_or_as_a_robot_tracks_it():
+    sweeping = load_scenario("oscillating_obstacle")
+    start = np.array([-2.5, 0.0, 0.0, 0.0, 0.0])
+    told, tracked = ObstacleProbe(), ObstacleProbe()
+    drive(told, sweeping, start, replan_every=10)
+    drive(tracked, sweeping, start, replan_every=10, prediction="tracked")
+    times = np.arange(len(told.seen)) * 1.0
+    truth = sweeping.obstacle.position(times + 1.0)
+    np.testing.assert_allclose(told.seen, truth, atol=1e-9)
+    # a robot predicts at constant velocity: a sweep that turns back within the second is missed
+    velocity = sweeping.obstacle.velocity_at(times)
+    np.testing.assert_allclose(tracked.seen, sweeping.obstacle.position(times) + velocity, atol=1e-9)
+    assert np.max(np.linalg.norm(np.asarray(tracked.seen) - truth, axis=1)) > 0.1
+    with pytest.raises(LearningError, match="prediction must be one of"):
+        drive(told, sweeping, start, prediction="future")
 
 
 def test_a_reward_that_crawls_is_refused_and_calibration_brings_it_to_the_persons_pace(demos):

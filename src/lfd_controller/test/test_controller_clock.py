@@ -12,6 +12,7 @@ from lfd_controller.features import Task, observed_acceleration
 from lfd_controller.params import RewardControllerParams
 from lfd_controller.planner import CollisionBarrier, RecedingHorizonController
 from lfd_controller.ros_controller import RewardControllerNode
+from robot_common.tasks import scenario_from_dict
 from robot_common.unicycle import Unicycle
 
 
@@ -99,6 +100,36 @@ def test_an_obstacle_s_hardest_recent_change_of_velocity_is_measured_over_half_a
     # more than ACCEL_MEMORY s later it is forgotten
     assert observed_acceleration(times, velocities) == 0.0
     assert observed_acceleration([1.0], [[0.0, 1.0]]) == 0.0
+
+
+def test_a_tracked_task_is_what_a_robot_s_node_sees_of_the_scenario_s_obstacle():
+    # a walker at a steady 0.3 m/s: the constant-velocity prediction is exact, with no allowance
+    walking = scenario_from_dict({"name": "walking", "goal": {"x": 0.0, "y": 0.0},
+                                  "obstacle": {"x": -1.2, "y": -1.0, "radius": 0.25,
+                                               "motion": {"kind": "linear", "velocity": [0.0, 0.3]}}})
+    task = Task.tracked(walking, 3.0)
+    ahead = np.array([3.0, 3.5, 5.0])
+    np.testing.assert_allclose(task.obstacle_position(ahead), [[-1.2, -0.1], [-1.2, 0.05], [-1.2, 0.5]])
+    assert task.obstacle_spread is None and task.obstacle_radius == 0.25
+    # the node's floor on the allowance still applies: 0.3 m/s^2 x (1 s)^2 / 2 a second ahead
+    assert Task.tracked(walking, 3.0, accel=0.3).obstacle_spread(np.array([4.0])) == pytest.approx([0.15])
+    # an obstacle sweeping 0.8 m each way every 8 s: seen at its centre moving at full speed
+    # (2 pi / 8 x 0.8 m/s), it keeps that velocity in the prediction
+    sweeping = scenario_from_dict({"name": "sweeping", "goal": {"x": 0.0, "y": 0.0},
+                                   "obstacle": {"x": -1.2, "y": 0.0, "radius": 0.25,
+                                                "motion": {"kind": "oscillate", "amplitude": [0.0, 0.8],
+                                                           "period": 8.0}}})
+    peak = 2 * np.pi / 8.0 * 0.8
+    task = Task.tracked(sweeping, 8.0)
+    np.testing.assert_allclose(task.obstacle_position(np.array([8.0, 9.0])), [[-1.2, 0.0], [-1.2, peak]],
+                               atol=1e-9)
+    # it has been slowing and turning back: the allowance is for a change of velocity up to the
+    # sweep's hardest (peak x 2 pi / 8 m/s^2) and more than half of it (the last 2.5 s at 10 Hz)
+    hardest = peak * 2 * np.pi / 8.0
+    spread = Task.tracked(sweeping, 8.0).obstacle_spread(np.array([9.0]))[0]
+    assert 0.5 * 0.5 * hardest < spread <= 0.5 * hardest + 1e-9
+    # before half a second of track the node has measured no change: no allowance
+    assert Task.tracked(sweeping, 0.3).obstacle_spread is None
 
 
 def test_the_warm_start_is_the_previous_plan_shifted_by_elapsed_time():

@@ -38,7 +38,10 @@ mismatch) is then driven from the nearby starts too, and the verdict is on all i
 Rollouts here are the controller's own check, not a simulator: they step the same unicycle model
 the controller plans with, replanning every `replan_every` control steps (the plan's first
 command spans a planning step of 0.4 s, so replanning every 0.2 s changes little and halves the
-cost).
+cost). The controller knows the obstacle's future as `prediction` says: as the scenario has it,
+or as a robot's node tracks it (`Task.tracked`: its position and velocity at 10 Hz, kept constant,
+with an allowance for the changes of velocity it showed), so that the check holds the controller
+to the person's pace as it will drive on a robot.
 """
 import math
 from dataclasses import dataclass, field
@@ -70,6 +73,8 @@ VERDICT = {"reach_fraction": 0.8, "crawl_speed": 0.6, "crawl_time": 1.5, "room_t
 # this much below the person's (above it, the warning's tolerance holds: slowing a controller down
 # to the last few per cent can make it stall) and the time to goal no more than this much longer.
 AIM = 0.1
+# What a checked controller knows of the obstacle's future (`drive`)
+PREDICTIONS = ("scenario", "tracked")
 
 
 class NoGoalError(LearningError):
@@ -160,6 +165,7 @@ class Acceptance:
     rounds: int = 0
     drives: int = 0
     starts: Dict[str, int] = field(default_factory=dict)
+    prediction: str = "scenario"
 
     @property
     def accepted(self) -> bool:
@@ -194,8 +200,10 @@ class Acceptance:
         matched = [parts[k] for k in parts if self.matched.get(k)]
         missed = [parts[k] for k in parts if not self.matched.get(k)]
         where = ", ".join(f"{v} {k}" for k, v in self.starts.items()) or "demonstration"
-        text = (f"controller's own drives from {self.drives} starts ({where}; after {self.rounds} "
-                f"calibration rounds): ")
+        knows = {"scenario": "the obstacle's motion known",
+                 "tracked": "the obstacle tracked as on a robot"}[self.prediction]
+        text = (f"controller's own drives from {self.drives} starts ({where}; {knows}; after "
+                f"{self.rounds} calibration rounds): ")
         if not self.accepted:
             text += "FAILS where the person succeeded: " + "; ".join(self.failure_lines()) + " | "
         text += "matched: " + ("; ".join(matched) or "nothing")
@@ -215,7 +223,7 @@ class Acceptance:
         return {"accepted": self.accepted, "failures": dict(self.failures),
                 "demonstrated": self.demonstrated, "driven": self.driven, "matched": self.matched,
                 "warning": self.warning(), "scales": self.scales, "rounds": self.rounds,
-                "drives": self.drives, "starts": dict(self.starts)}
+                "drives": self.drives, "starts": dict(self.starts), "prediction": self.prediction}
 
 
 def compare(demonstrated: Dict, driven: Dict, *, speed_tolerance: float = 0.2,
@@ -240,9 +248,14 @@ def verdict(demonstrated: Dict, driven: Dict, moving: bool, *, reach_fraction: f
             "room": moving and driven["closest_min"] < demonstrated["closest_min"] - room_tolerance}
 
 
-def drive(controller, scenario, start, t0: float = 0.0, replan_every: int = 1) -> np.ndarray:
+def drive(controller, scenario, start, t0: float = 0.0, replan_every: int = 1,
+          prediction: str = "scenario") -> np.ndarray:
     """The controller's drive x_0..x_T from `start` at episode time t0 in the scenario's model,
-    until the goal region, a collision or the scenario's max_time."""
+    until the goal region, a collision or the scenario's max_time. `prediction` is what the
+    controller knows of the obstacle's future (PREDICTIONS): "scenario" its motion as the scenario
+    has it, "tracked" what a robot's node has (Task.tracked)."""
+    if prediction not in PREDICTIONS:
+        raise LearningError(f"prediction must be one of {PREDICTIONS}, got {prediction!r}")
     model, task = scenario.model(), Task.from_scenario(scenario)
     controller.reset()
     state = np.asarray(start, float)
@@ -250,7 +263,8 @@ def drive(controller, scenario, start, t0: float = 0.0, replan_every: int = 1) -
     for k in range(max(1, int(round((scenario.max_time - t0) / scenario.dt)))):
         t = t0 + k * scenario.dt
         if k % replan_every == 0:
-            command = controller.act(state, t, task)
+            seen = task if prediction == "scenario" else Task.tracked(scenario, t)
+            command = controller.act(state, t, seen)
         state = model.step(state, command)
         states.append(state)
         if scenario.collides(state, t + scenario.dt) or scenario.reached(state):
@@ -272,12 +286,12 @@ def scaled(reward: LinearReward, speed: float, obstacle: float) -> LinearReward:
     return LinearReward(weights, reward.features)
 
 
-def _drives(candidate, make_controller, margin, runs, replan_every):
+def _drives(candidate, make_controller, margin, runs, replan_every, prediction):
     """Statistics of the controller's drives from (demo, start) pairs."""
     stats = []
     for demo, start in runs:
         controller = make_controller(candidate, demo.scenario, margin)
-        trajectory = drive(controller, demo.scenario, start, demo.t0, replan_every)
+        trajectory = drive(controller, demo.scenario, start, demo.t0, replan_every, prediction)
         stats.append(trajectory_statistics(demo.scenario, trajectory, demo.t0))
     return stats
 
@@ -285,7 +299,7 @@ def _drives(candidate, make_controller, margin, runs, replan_every):
 def calibrate(reward, demos: Sequence[Demonstration], make_controller: Callable, *, rounds: int = 3,
               max_drives: int = 6, nearby: int = 2, replan_every: int = 2, seed: int = 0,
               progress: Optional[Callable] = None, margin_bounds=MARGIN_BOUNDS,
-              verdict_options: Optional[Dict] = None, **tolerances):
+              verdict_options: Optional[Dict] = None, prediction: str = "scenario", **tolerances):
     """(reward, Acceptance): the controller (make_controller(reward, scenario, margin)) driven from
     up to `max_drives` demonstration starts (demonstrations that reach the goal: NoGoalError when
     none does) for at most `rounds` rounds of calibration (speed and obstacle scales, barrier
@@ -293,7 +307,8 @@ def calibrate(reward, demos: Sequence[Demonstration], make_controller: Callable,
     verdict (`verdict`, options `verdict_options`) is on all its drives. The margin starts at
     the demonstrations' median closest approach less 0.05 m, within `margin_bounds` (around a
     moving obstacle never below their smallest less 0.05 m); Acceptance.scales holds speed,
-    obstacle and margin."""
+    obstacle and margin. Every drive knows the obstacle's future as `prediction` says (`drive`).
+    """
     if not isinstance(reward, LinearReward):
         raise LearningError("calibration needs a linear reward")
     demos = goal_reaching(demos)
@@ -312,13 +327,13 @@ def calibrate(reward, demos: Sequence[Demonstration], make_controller: Callable,
     for round_ in range(1, max(1, rounds) + 1):
         candidate = scaled(reward, scales["speed"], scales["obstacle"])
         stats = _drives(candidate, make_controller, scales["margin"],
-                        [(d, d.start) for d in chosen], replan_every)
+                        [(d, d.start) for d in chosen], replan_every, prediction)
         driven = summarise(stats)
         matched = compare(person, driven, **tolerances)
         failures = verdict(person, driven, moving, **options)
         report = Acceptance(person, driven, matched, failures,
                             {k: round(v, 4) for k, v in scales.items()}, round_, len(chosen),
-                            {"demonstrated": len(chosen)})
+                            {"demonstrated": len(chosen)}, prediction)
         score = (not any(failures.values()), sum(matched.values()), -_mismatch(person, driven))
         if best is None or score > best[0]:
             best = (score, candidate, report, stats, dict(scales))
@@ -331,11 +346,12 @@ def calibrate(reward, demos: Sequence[Demonstration], make_controller: Callable,
     _, candidate, report, stats, scales = best
     rng = np.random.default_rng(seed)
     runs = [(d, start) for d in chosen for start in nearby_starts(d, nearby, rng)]
-    stats = stats + _drives(candidate, make_controller, scales["margin"], runs, replan_every)
+    stats = stats + _drives(candidate, make_controller, scales["margin"], runs, replan_every,
+                            prediction)
     driven = summarise(stats)
     report = Acceptance(person, driven, compare(person, driven, **tolerances),
                         verdict(person, driven, moving, **options), report.scales, round_,
-                        len(stats), {"demonstrated": len(chosen), "nearby": len(runs)})
+                        len(stats), {"demonstrated": len(chosen), "nearby": len(runs)}, prediction)
     if progress is not None:
         progress(report)
     return candidate, report

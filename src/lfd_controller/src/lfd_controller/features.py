@@ -119,6 +119,18 @@ class Task:
             return 0.5 * accel * ahead ** 2
         return cls(np.asarray(goal, float), predict, radius, spread if accel > 0 else None)
 
+    @classmethod
+    def tracked(cls, scenario, now: float, rate: float = 10.0, accel: float = 0.0) -> "Task":
+        """The task as reward_controller builds it on a robot from the obstacle's odometry at
+        `rate` Hz, at episode time `now`: where the obstacle is and its velocity then, kept
+        constant (constant_velocity), with the allowance for the hardest change of velocity it
+        showed in the last ACCEL_MEMORY s (observed_acceleration; never below `accel`)."""
+        obstacle = scenario.obstacle
+        seen = np.arange(max(now - ACCEL_MEMORY - ACCEL_SPAN, 0.0), now + 1e-9, 1.0 / rate)
+        hardest = max(accel, observed_acceleration(seen, obstacle.velocity_at(seen)))
+        return cls.constant_velocity(scenario.goal, obstacle.position(now), obstacle.velocity_at(now),
+                                     now, obstacle.radius, hardest)
+
 
 @dataclass
 class FeatureValues:
