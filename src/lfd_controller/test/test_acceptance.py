@@ -240,6 +240,8 @@ def test_a_checked_controller_knows_the_obstacle_as_the_scenario_has_it_or_as_a_
     assert np.max(np.linalg.norm(np.asarray(tracked.seen) - truth, axis=1)) > 0.1
     with pytest.raises(LearningError, match="prediction must be one of"):
         drive(told, sweeping, start, prediction="future")
+    with pytest.raises(LearningError, match="prediction must be one of"):
+        calibrate(reward_of(BRISK), [], unbudgeted, prediction="future")
 
 
 def test_a_reward_that_crawls_is_refused_and_calibration_brings_it_to_the_persons_pace(demos):

@@ -311,6 +311,8 @@ def calibrate(reward, demos: Sequence[Demonstration], make_controller: Callable,
     """
     if not isinstance(reward, LinearReward):
         raise LearningError("calibration needs a linear reward")
+    if prediction not in PREDICTIONS:
+        raise LearningError(f"prediction must be one of {PREDICTIONS}, got {prediction!r}")
     demos = goal_reaching(demos)
     picks = np.linspace(0, len(demos) - 1, min(max_drives, len(demos))).round().astype(int)
     chosen = [demos[i] for i in sorted(set(picks.tolist()))]
