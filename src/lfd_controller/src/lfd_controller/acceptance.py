@@ -248,14 +248,18 @@ def verdict(demonstrated: Dict, driven: Dict, moving: bool, *, reach_fraction: f
             "room": moving and driven["closest_min"] < demonstrated["closest_min"] - room_tolerance}
 
 
+def _check_prediction(prediction: str) -> None:
+    if prediction not in PREDICTIONS:
+        raise LearningError(f"prediction must be one of {PREDICTIONS}, got {prediction!r}")
+
+
 def drive(controller, scenario, start, t0: float = 0.0, replan_every: int = 1,
           prediction: str = "scenario") -> np.ndarray:
     """The controller's drive x_0..x_T from `start` at episode time t0 in the scenario's model,
     until the goal region, a collision or the scenario's max_time. `prediction` is what the
     controller knows of the obstacle's future (PREDICTIONS): "scenario" its motion as the scenario
     has it, "tracked" what a robot's node has (Task.tracked)."""
-    if prediction not in PREDICTIONS:
-        raise LearningError(f"prediction must be one of {PREDICTIONS}, got {prediction!r}")
+    _check_prediction(prediction)
     model, task = scenario.model(), Task.from_scenario(scenario)
     controller.reset()
     state = np.asarray(start, float)
@@ -311,8 +315,7 @@ def calibrate(reward, demos: Sequence[Demonstration], make_controller: Callable,
     """
     if not isinstance(reward, LinearReward):
         raise LearningError("calibration needs a linear reward")
-    if prediction not in PREDICTIONS:
-        raise LearningError(f"prediction must be one of {PREDICTIONS}, got {prediction!r}")
+    _check_prediction(prediction)
     demos = goal_reaching(demos)
     picks = np.linspace(0, len(demos) - 1, min(max_drives, len(demos))).round().astype(int)
     chosen = [demos[i] for i in sorted(set(picks.tolist()))]
